@@ -1,0 +1,109 @@
+//! Per-vehicle configuration: what the estimator must know about the sensors and the terrain.
+
+use nalgebra::{Isometry3, Vector3};
+
+use crate::camera::CameraModel;
+
+/// IMU noise model (continuous-time densities, as in the EuRoC/Kalibr `sensor.yaml`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImuConfig {
+    /// Nominal sample rate, Hz.
+    pub rate_hz: f64,
+    /// Gyro white noise density, rad/s/√Hz.
+    pub gyro_noise_density: f64,
+    /// Gyro bias random walk, rad/s²/√Hz.
+    pub gyro_random_walk: f64,
+    /// Accelerometer white noise density, m/s²/√Hz.
+    pub accel_noise_density: f64,
+    /// Accelerometer bias random walk, m/s³/√Hz.
+    pub accel_random_walk: f64,
+}
+
+impl ImuConfig {
+    /// A tactical-grade MEMS IMU (the simulator's default and the estimator's fallback).
+    pub const TACTICAL_MEMS: ImuConfig = ImuConfig {
+        rate_hz: 200.0,
+        gyro_noise_density: 1.0e-4,
+        gyro_random_walk: 2.0e-6,
+        accel_noise_density: 1.0e-3,
+        accel_random_walk: 1.0e-4,
+    };
+}
+
+impl Default for ImuConfig {
+    fn default() -> Self {
+        Self::TACTICAL_MEMS
+    }
+}
+
+/// GNSS receiver configuration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GnssConfig {
+    /// Nominal fix rate, Hz.
+    pub rate_hz: f64,
+    /// Antenna phase centre in the body frame (the lever arm from the IMU), m.
+    pub lever_arm_body_m: Vector3<f64>,
+}
+
+impl Default for GnssConfig {
+    fn default() -> Self {
+        Self { rate_hz: 5.0, lever_arm_body_m: Vector3::zeros() }
+    }
+}
+
+/// One camera's intrinsics and mounting.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CameraConfig {
+    /// Nominal frame rate, Hz.
+    pub rate_hz: f64,
+    /// Intrinsics and distortion.
+    pub model: CameraModel,
+    /// Camera pose in the body frame: `p_body = body_from_cam * p_cam` (EuRoC `T_BS`).
+    pub body_from_cam: Isometry3<f64>,
+}
+
+/// Which fusion architecture runs for a vehicle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum FilterProfile {
+    /// The error-state EKF (default).
+    #[default]
+    Eskf,
+    /// The paper's three-EKF architecture (baseline).
+    Paper,
+}
+
+impl FilterProfile {
+    /// The profile's CLI / config name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            FilterProfile::Eskf => "eskf",
+            FilterProfile::Paper => "paper",
+        }
+    }
+}
+
+impl std::str::FromStr for FilterProfile {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "eskf" => Ok(FilterProfile::Eskf),
+            "paper" => Ok(FilterProfile::Paper),
+            other => Err(format!("unknown filter profile '{other}' (expected eskf or paper)")),
+        }
+    }
+}
+
+/// Everything the estimator is told about one vehicle.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct VehicleConfig {
+    /// IMU noise model.
+    pub imu: ImuConfig,
+    /// GNSS receiver, if fitted.
+    pub gnss: Option<GnssConfig>,
+    /// Camera 0, if fitted.
+    pub camera: Option<CameraConfig>,
+    /// Terrain elevation above the WGS84 ellipsoid, m (the flat-Earth-surface model of the paper).
+    pub terrain_elevation_m: f64,
+    /// Fusion architecture.
+    pub profile: FilterProfile,
+}

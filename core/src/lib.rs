@@ -1,0 +1,44 @@
+//! # uavnav-core
+//!
+//! The vocabulary every other uavnav crate speaks. Pure: no I/O, no clock, no async.
+//!
+//! | module | what it holds |
+//! |---|---|
+//! | [`sensors`] | sensor samples (IMU, GNSS, camera frame) and the [`sensors::SensorEvent`] stream item |
+//! | [`config`] | per-vehicle configuration: IMU noise, GNSS lever arm, camera, terrain, filter profile |
+//! | [`geodesy`] | WGS84: LLA ↔ ECEF ↔ local NED, normal gravity, radii of curvature |
+//! | [`camera`] | pinhole + radial-tangential camera model (project, distort, undistort) |
+//! | [`rotation`] | ZYX Euler angles, skew matrices, small-angle helpers |
+//! | [`rng`] | a seeded, version-stable random generator (xoshiro256**) with Gaussian draws |
+//! | [`truth`] | ground-truth state samples (the EuRoC `state_groundtruth_estimate0` row) |
+//!
+//! Conventions (project-wide): SI units; time is integer nanoseconds (`i64`, `t_ns`); world frame =
+//! local NED; body = FRD = IMU frame; camera = OpenCV (x right, y down, z optical axis); quaternions
+//! are Hamilton, `w` first; a transform named `a_from_b` maps coordinates in `b` into `a`.
+
+pub mod camera;
+pub mod config;
+pub mod geodesy;
+pub mod rng;
+pub mod rotation;
+pub mod sensors;
+pub mod truth;
+
+pub use camera::{CameraModel, Distortion};
+pub use config::{CameraConfig, FilterProfile, GnssConfig, ImuConfig, VehicleConfig};
+pub use geodesy::{Lla, LocalFrame};
+pub use sensors::{CameraFrame, FixType, GnssFix, ImageFormat, ImuSample, SensorEvent};
+pub use truth::TruthSample;
+
+/// Nanoseconds per second, for `t_ns` ↔ seconds conversions.
+pub const NS_PER_S: i64 = 1_000_000_000;
+
+/// Converts a nanosecond duration to seconds.
+pub fn ns_to_s(dt_ns: i64) -> f64 {
+    dt_ns as f64 * 1e-9
+}
+
+/// Converts seconds to the nearest nanosecond.
+pub fn s_to_ns(dt_s: f64) -> i64 {
+    (dt_s * 1e9).round() as i64
+}
