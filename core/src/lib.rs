@@ -10,6 +10,7 @@
 //! | [`camera`] | pinhole + radial-tangential camera model (project, distort, undistort) |
 //! | [`rotation`] | ZYX Euler angles, skew matrices, small-angle helpers |
 //! | [`rng`] | a seeded, version-stable random generator (xoshiro256**) with Gaussian draws |
+//! | [`egomotion`] | the camera relative-motion measurement shared by vision and estimator |
 //! | [`truth`] | ground-truth state samples (the EuRoC `state_groundtruth_estimate0` row) |
 //!
 //! Conventions (project-wide): SI units; time is integer nanoseconds (`i64`, `t_ns`); world frame =
@@ -18,6 +19,7 @@
 
 pub mod camera;
 pub mod config;
+pub mod egomotion;
 pub mod geodesy;
 pub mod rng;
 pub mod rotation;
@@ -25,6 +27,7 @@ pub mod sensors;
 pub mod truth;
 
 pub use camera::{CameraModel, Distortion};
+pub use egomotion::{Egomotion, EgomotionSolver};
 pub use config::{CameraConfig, FilterProfile, GnssConfig, ImuConfig, VehicleConfig};
 pub use geodesy::{Lla, LocalFrame};
 pub use sensors::{CameraFrame, FixType, GnssFix, ImageFormat, ImuSample, SensorEvent};

@@ -1,0 +1,61 @@
+//! The camera egomotion measurement: what the vision front end hands to the estimator.
+//!
+//! Defined here so that the vision and estimator crates share it without depending on each other.
+
+use nalgebra::{Matrix3, Matrix6, Unit, UnitQuaternion, Vector3};
+
+/// Which geometric solver produced an egomotion measurement.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum EgomotionSolver {
+    /// The paper's normalized 8-point essential matrix + Huang–Faugeras factorization.
+    Essential,
+    /// Plane-aware solver using the ground normal from the attitude estimate.
+    Plane,
+    /// Rotation only (no translation observable, e.g. static camera).
+    RotationOnly,
+}
+
+impl EgomotionSolver {
+    /// Name for CSV columns and logs.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            EgomotionSolver::Essential => "essential",
+            EgomotionSolver::Plane => "plane",
+            EgomotionSolver::RotationOnly => "rotation",
+        }
+    }
+}
+
+/// Relative motion of the camera between two frames, with its first-order covariance.
+///
+/// Geometry: a point with coordinates `x0` in camera frame 0 has `x1 = cam1_from_cam0 · x0 + t`
+/// in camera frame 1, where `t` is the translation expressed in camera frame 1 (the paper's
+/// `r_21^{c2}` up to sign conventions: here it is exactly the `t` of `x1 = R x0 + t`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Egomotion {
+    /// Time of frame 0, ns.
+    pub t0_ns: i64,
+    /// Time of frame 1, ns.
+    pub t1_ns: i64,
+    /// Rotation taking camera-0 coordinates into camera-1 coordinates.
+    pub cam1_from_cam0: UnitQuaternion<f64>,
+    /// Unit direction of `t` (camera-1 frame); `None` when translation is not observable.
+    pub t_dir_cam1: Option<Unit<Vector3<f64>>>,
+    /// Metric `t` (camera-1 frame, m) when the scene distance is known (terrain model), else `None`.
+    pub t_cam1_m: Option<Vector3<f64>>,
+    /// Covariance of the rotation error `δθ` (rad²), with `R_meas = Exp(δθ) · R_true`, camera-1 frame.
+    pub rot_cov: Matrix3<f64>,
+    /// Covariance of the translation: of the unit direction (rank 2) or of the metric `t` when
+    /// `t_cam1_m` is set, camera-1 frame.
+    pub t_cov: Matrix3<f64>,
+    /// Joint 6×6 covariance [δθ; δt] when the solver provides cross terms (else block-diagonal).
+    pub joint_cov: Matrix6<f64>,
+    /// Features tracked from frame 0 into frame 1.
+    pub tracked: u32,
+    /// Inliers of the robust solver.
+    pub inliers: u32,
+    /// Quality score in [0, 1] (1 = best).
+    pub quality: f64,
+    /// Solver used.
+    pub solver: EgomotionSolver,
+}
