@@ -59,3 +59,20 @@ pub struct Egomotion {
     /// Solver used.
     pub solver: EgomotionSolver,
 }
+
+/// What the estimator knows about the motion between two frames, handed to the vision front end
+/// to predict the optical flow (paper section IV-A) and to pick the plane-aware solver.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct MotionPrior {
+    /// Rotation from camera-0 to camera-1 coordinates integrated from the gyros, if known.
+    pub cam1_from_cam0: Option<UnitQuaternion<f64>>,
+    /// 1-σ uncertainty of that rotation per axis, rad.
+    pub rot_sigma_rad: f64,
+    /// Unit normal of the terrain plane (the Earth-surface model at the terrain elevation), pointing
+    /// from the camera towards the ground (NED "down"), in camera-0 coordinates.
+    pub ground_normal_cam0: Option<Unit<Vector3<f64>>>,
+    /// Perpendicular distance from the camera-0 centre to the terrain plane, m.
+    pub ground_distance_m: Option<f64>,
+    /// Predicted translation `t` (x1 = R x0 + t), camera-1 frame, m, from the velocity estimate.
+    pub t_cam1_m: Option<Vector3<f64>>,
+}

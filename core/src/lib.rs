@@ -27,7 +27,7 @@ pub mod sensors;
 pub mod truth;
 
 pub use camera::{CameraModel, Distortion};
-pub use egomotion::{Egomotion, EgomotionSolver};
+pub use egomotion::{Egomotion, EgomotionSolver, MotionPrior};
 pub use config::{CameraConfig, FilterProfile, GnssConfig, ImuConfig, VehicleConfig};
 pub use geodesy::{Lla, LocalFrame};
 pub use sensors::{CameraFrame, FixType, GnssFix, ImageFormat, ImuSample, SensorEvent};
