@@ -1,0 +1,280 @@
+//! A whole simulated flight: truth, IMU, GNSS and camera times precomputed from a [`Scenario`].
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use uavnav_core::{
+    CameraConfig, CameraModel, Distortion, GnssConfig, GnssFix, ImuConfig, ImuSample, Lla,
+    LocalFrame, TruthSample, VehicleConfig,
+};
+
+use crate::scenario::Scenario;
+use crate::sensors::{ImuErrors, grid_indices, ideal_imu, simulate_gnss};
+use crate::strapdown::earth_rate_ned;
+use crate::trajectory::Trajectory;
+
+/// Lowest height above the terrain a scenario may fly, m.
+pub const MIN_HEIGHT_AGL_M: f64 = 10.0;
+/// Steepest bank a scenario may command, rad (60°).
+pub const MAX_BANK_RAD: f64 = std::f64::consts::FRAC_PI_3;
+
+/// Why a flight cannot be simulated or a frame not produced.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SimError {
+    /// The scenario parses but describes an impossible flight.
+    #[error("invalid scenario: {0}")]
+    Invalid(String),
+    /// A camera frame index past the end.
+    #[error("camera frame {index} out of range (flight has {len} frames)")]
+    FrameIndex {
+        /// Requested index.
+        index: usize,
+        /// Number of frames.
+        len: usize,
+    },
+    /// The image encoder failed.
+    #[error("JPEG encoding failed: {0}")]
+    Encode(String),
+}
+
+/// A precomputed flight. Frames are rendered on demand.
+#[derive(Debug, Clone)]
+pub struct Flight {
+    pub(crate) scenario: Scenario,
+    pub(crate) frame: LocalFrame,
+    truth: Vec<TruthSample>,
+    ideal: Vec<ImuSample>,
+    imu: Vec<ImuSample>,
+    gnss: Vec<GnssFix>,
+    pub(crate) camera_times_ns: Vec<i64>,
+    /// Truth index of each camera frame.
+    pub(crate) camera_truth_index: Vec<usize>,
+}
+
+impl Flight {
+    /// Simulates everything but the images.
+    pub fn new(scenario: &Scenario) -> Result<Flight, SimError> {
+        let s = scenario;
+        let dt_ns = (1e9 / s.imu.rate_hz).round() as i64;
+        if dt_ns <= 0 {
+            return Err(SimError::Invalid(format!(
+                "imu.rate_hz {} is too high",
+                s.imu.rate_hz
+            )));
+        }
+        let n = (s.duration_s * 1e9 / dt_ns as f64 + 1e-6).floor() as usize + 1;
+        if n < 2 {
+            return Err(SimError::Invalid(
+                "duration_s is shorter than one IMU period".into(),
+            ));
+        }
+        check_camera(s)?;
+        let origin = Lla::from_deg(s.origin.lat_deg, s.origin.lon_deg, s.origin.alt_m);
+        let frame = LocalFrame::new(origin);
+        let omega_ie = earth_rate_ned(origin.lat_rad);
+        let traj = Trajectory::new(&s.trajectory);
+        let times_s: Vec<f64> = (0..n).map(|k| (k as i64 * dt_ns) as f64 * 1e-9).collect();
+        let positions = traj.positions(&times_s);
+        let mut errors = ImuErrors::new(&s.imu, s.seed, dt_ns as f64 * 1e-9);
+        let (mut truth, mut ideal, mut imu, mut omega_nb) = (
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+        );
+        for (k, (t_s, p)) in times_s.iter().zip(&positions).enumerate() {
+            let t_ns = s.t0_ns + k as i64 * dt_ns;
+            let kin = traj.kinematics(*t_s);
+            check_state(&frame, s, *t_s, p, kin.euler_rad.x)?;
+            let clean = ideal_imu(t_ns, &kin, &frame.gravity_ned(p), &omega_ie);
+            let (noisy, bg, ba) = errors.apply(&clean);
+            truth.push(TruthSample {
+                t_ns,
+                pos_ned_m: *p,
+                nav_from_body: kin.nav_from_body,
+                vel_ned_mps: kin.vel_ned_mps,
+                gyro_bias_radps: bg,
+                accel_bias_mps2: ba,
+            });
+            ideal.push(clean);
+            imu.push(noisy);
+            omega_nb.push(kin.omega_nb_body_radps);
+        }
+        let gnss = if s.gnss.enabled {
+            let idx = grid_indices(s.gnss.rate_hz, s.imu.rate_hz, n);
+            simulate_gnss(&s.gnss, s.seed, &frame, s.t0_ns, &truth, &omega_nb, &idx)
+        } else {
+            Vec::new()
+        };
+        let camera_truth_index = if s.camera.enabled {
+            grid_indices(s.camera.rate_hz, s.imu.rate_hz, n)
+        } else {
+            Vec::new()
+        };
+        let camera_times_ns = camera_truth_index.iter().map(|&k| truth[k].t_ns).collect();
+        Ok(Flight {
+            scenario: s.clone(),
+            frame,
+            truth,
+            ideal,
+            imu,
+            gnss,
+            camera_times_ns,
+            camera_truth_index,
+        })
+    }
+
+    /// The scenario this flight was made from.
+    pub fn scenario(&self) -> &Scenario {
+        &self.scenario
+    }
+
+    /// The truth origin (the local NED frame's origin, the EuRoC `R` frame).
+    pub fn origin(&self) -> Lla {
+        self.frame.origin()
+    }
+
+    /// The local NED frame at the origin.
+    pub fn local_frame(&self) -> &LocalFrame {
+        &self.frame
+    }
+
+    /// What the estimator is told about the vehicle.
+    pub fn vehicle_config(&self) -> VehicleConfig {
+        let s = &self.scenario;
+        VehicleConfig {
+            imu: ImuConfig {
+                rate_hz: s.imu.rate_hz,
+                gyro_noise_density: s.imu.gyro_noise_density,
+                gyro_random_walk: s.imu.gyro_random_walk,
+                accel_noise_density: s.imu.accel_noise_density,
+                accel_random_walk: s.imu.accel_random_walk,
+            },
+            gnss: s.gnss.enabled.then(|| GnssConfig {
+                rate_hz: s.gnss.rate_hz,
+                lever_arm_body_m: Vector3::from(s.gnss.lever_arm_m),
+            }),
+            camera: s.camera.enabled.then(|| CameraConfig {
+                rate_hz: s.camera.rate_hz,
+                model: self.camera_model(),
+                body_from_cam: self.body_from_cam(),
+            }),
+            terrain_elevation_m: s.terrain.elevation_m,
+            profile: Default::default(),
+        }
+    }
+
+    /// The camera intrinsics.
+    pub fn camera_model(&self) -> CameraModel {
+        camera_model(&self.scenario)
+    }
+
+    /// The camera mount: `p_body = body_from_cam · p_cam`.
+    pub fn body_from_cam(&self) -> Isometry3<f64> {
+        let c = &self.scenario.camera;
+        let [r, p, y] = c.body_from_cam_rpy_deg.map(f64::to_radians);
+        Isometry3::from_parts(
+            Translation3::from(Vector3::from(c.body_from_cam_xyz_m)),
+            UnitQuaternion::from_euler_angles(r, p, y),
+        )
+    }
+
+    /// Truth at every IMU sample time.
+    pub fn truth(&self) -> &[TruthSample] {
+        &self.truth
+    }
+
+    /// The IMU as measured (noise and biases included).
+    pub fn imu(&self) -> &[ImuSample] {
+        &self.imu
+    }
+
+    /// The noise-free, bias-free IMU at the same times.
+    pub fn ideal_imu(&self) -> Vec<ImuSample> {
+        self.ideal.clone()
+    }
+
+    /// The GNSS fixes (none inside outages).
+    pub fn gnss(&self) -> &[GnssFix] {
+        &self.gnss
+    }
+
+    /// Camera frame times (on the IMU grid), ns.
+    pub fn camera_times_ns(&self) -> &[i64] {
+        &self.camera_times_ns
+    }
+
+    /// Truth at camera frame `index`, if it exists.
+    pub fn camera_truth(&self, index: usize) -> Option<&TruthSample> {
+        self.camera_truth_index.get(index).map(|&k| &self.truth[k])
+    }
+}
+
+/// The camera intrinsics of a scenario.
+pub(crate) fn camera_model(s: &Scenario) -> CameraModel {
+    let c = &s.camera;
+    let [k1, k2, p1, p2] = c.distortion;
+    let distortion = if c.distortion == [0.0; 4] {
+        Distortion::None
+    } else {
+        Distortion::RadTan { k1, k2, p1, p2 }
+    };
+    CameraModel {
+        width: c.width,
+        height: c.height,
+        fx: c.fx,
+        fy: c.fy,
+        cx: c.cx,
+        cy: c.cy,
+        distortion,
+    }
+}
+
+fn check_camera(s: &Scenario) -> Result<(), SimError> {
+    let c = &s.camera;
+    if !c.enabled {
+        return Ok(());
+    }
+    if c.width == 0 || c.height == 0 || c.width > 8192 || c.height > 8192 {
+        return Err(SimError::Invalid(format!(
+            "camera size {}×{} must be 1..=8192 px",
+            c.width, c.height
+        )));
+    }
+    if !(1..=100).contains(&c.jpeg_quality) {
+        return Err(SimError::Invalid(format!(
+            "camera.jpeg_quality {} must be 1..=100",
+            c.jpeg_quality
+        )));
+    }
+    if ![c.cx, c.cy]
+        .iter()
+        .chain(&c.distortion)
+        .chain(&c.body_from_cam_rpy_deg)
+        .all(|x| x.is_finite())
+    {
+        return Err(SimError::Invalid("camera parameters must be finite".into()));
+    }
+    Ok(())
+}
+
+fn check_state(
+    frame: &LocalFrame,
+    s: &Scenario,
+    t_s: f64,
+    p: &Vector3<f64>,
+    bank_rad: f64,
+) -> Result<(), SimError> {
+    if bank_rad.abs() > MAX_BANK_RAD {
+        return Err(SimError::Invalid(format!(
+            "bank {:.1}° at t = {t_s:.2} s exceeds {:.0}°: reduce the turn rate or speed",
+            bank_rad.to_degrees(),
+            MAX_BANK_RAD.to_degrees()
+        )));
+    }
+    let agl = frame.ned_to_lla(p).alt_m - s.terrain.elevation_m;
+    if agl < MIN_HEIGHT_AGL_M {
+        return Err(SimError::Invalid(format!(
+            "the vehicle is {agl:.1} m above the terrain at t = {t_s:.2} s (minimum {MIN_HEIGHT_AGL_M} m)"
+        )));
+    }
+    Ok(())
+}
