@@ -1,0 +1,98 @@
+//! Speed targets: IMU propagation ≤ 2 µs per sample (the whole `push_imu`: output predictor,
+//! horizon nominal integration, amortised covariance prediction), one GNSS update ≤ 10 µs (position
+//! + velocity gated updates of the 24-state ESKF).
+//!
+//! `CARGO_TARGET_DIR=/work/target-estimator cargo bench -p uavnav-estimator --bench filter`
+
+use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
+use nalgebra::Vector3;
+use uavnav_core::{FilterProfile, ImuSample};
+use uavnav_estimator::aid_sources::gnss_pos::{GnssMeas, GnssPosSource, white_noise};
+use uavnav_estimator::aid_sources::gnss_vel::GnssVelSource;
+use uavnav_estimator::{Estimator, EstimatorParams};
+use uavnav_sim::{Flight, Scenario};
+
+fn flight() -> Flight {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../scenarios/paper-small-lever.toml"
+    ))
+    .expect("scenario file");
+    let mut s = Scenario::from_toml_str(&text).expect("scenario parses");
+    s.duration_s = 40.0;
+    Flight::new(&s).expect("flight")
+}
+
+fn warmed_up(f: &Flight, profile: FilterProfile, until: usize) -> Estimator {
+    let mut vc = f.vehicle_config();
+    vc.profile = profile;
+    vc.camera = None;
+    let mut est = Estimator::new(&vc, EstimatorParams::default(), Some(f.origin()));
+    let mut gi = 0;
+    for s in &f.imu()[..until] {
+        while gi < f.gnss().len() && f.gnss()[gi].t_ns <= s.t_ns {
+            est.push_gnss(&f.gnss()[gi]).expect("fix");
+            gi += 1;
+        }
+        est.push_imu(s).expect("imu");
+    }
+    est
+}
+
+fn bench(c: &mut Criterion) {
+    let f = flight();
+    let start = 4000; // 20 s in: initialised, GNSS fused
+    const BATCH: usize = 400;
+    let samples: Vec<ImuSample> = f.imu()[start..start + BATCH].to_vec();
+    for (name, profile) in [
+        ("eskf", FilterProfile::Eskf),
+        ("paper", FilterProfile::Paper),
+    ] {
+        let est = warmed_up(&f, profile, start);
+        let mut g = c.benchmark_group(format!("{name}_imu"));
+        g.throughput(Throughput::Elements(BATCH as u64));
+        g.bench_function("push_imu x400 (no measurements)", |b| {
+            b.iter_batched(
+                || est.clone(),
+                |mut e| {
+                    for s in &samples {
+                        let _ = std::hint::black_box(e.push_imu(s));
+                    }
+                    e
+                },
+                BatchSize::SmallInput,
+            )
+        });
+        g.finish();
+    }
+    let est = warmed_up(&f, FilterProfile::Eskf, start);
+    let eskf = est.eskf().expect("eskf profile");
+    let x = *eskf.nominal().expect("initialised");
+    let p0 = *eskf.covariance();
+    let lever = Vector3::new(0.0, 2.0, 0.0);
+    let m = GnssMeas {
+        t_ns: x.t_ns,
+        pos_ned_m: x.p + x.q * lever + Vector3::new(0.3, -0.2, 0.5),
+        vel_ned_mps: x.v + Vector3::new(0.02, 0.01, -0.03),
+        sigma_h_m: 1.58,
+        sigma_v_m: 2.6,
+        sigma_vel_mps: 0.05,
+    };
+    let r = white_noise(&m, 0.9, 0.05);
+    let gyro = Vector3::new(0.01, -0.02, 0.05);
+    let w_ie = Vector3::new(5e-5, 0.0, -4e-5);
+    c.bench_function("eskf_gnss_update (pos+vel)", |b| {
+        b.iter_batched(
+            || (p0, GnssPosSource::default(), GnssVelSource::default()),
+            |(mut p, mut sp, mut sv)| {
+                let a = sp.fuse(&x, &mut p, &lever, &m, &r, 3.29, 5_000_000_000);
+                let v = sv.fuse(&x, &mut p, &lever, &gyro, &w_ie, &m, 3.29, 5_000_000_000);
+                std::hint::black_box((a, v, p))
+            },
+            BatchSize::SmallInput,
+        )
+    });
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

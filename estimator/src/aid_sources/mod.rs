@@ -1,0 +1,121 @@
+//! Aiding sources of the error-state EKF, one file each (as PX4 EKF2 `aid_sources/`), sharing the
+//! gated Kalman update and a uniform innovation diagnostics record.
+//!
+//! | module | measurement |
+//! |---|---|
+//! | [`gnss_pos`] | antenna position through the lever arm (paper eq. 32) + Gauss–Markov error |
+//! | [`gnss_vel`] | antenna velocity with the `C(ω×r)` term (paper eq. 33) |
+//! | [`vision`] | relative rotation and direction of travel / metric translation between frames |
+
+pub mod gnss_pos;
+pub mod gnss_vel;
+pub mod vision;
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::prediction::symmetrize;
+use crate::state::{Cov, ErrVec, N};
+
+/// Innovation diagnostics of one aiding source (returned in every [`crate::Health`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct InnovDiag {
+    /// Last innovation (measurement − prediction), up to 3 components (unused are 0).
+    pub innov: [f64; 3],
+    /// Last innovation variances (diagonal of S).
+    pub innov_var: [f64; 3],
+    /// Last test ratio NIS / gate (> 1 = rejected).
+    pub test_ratio: f64,
+    /// Measurements fused.
+    pub fused: u64,
+    /// Measurements rejected by the gate.
+    pub rejected: u64,
+    /// Rejections in a row (reset by a fusion).
+    pub consecutive_rejects: u32,
+    /// Time of the last fusion, ns (`i64::MIN` = never).
+    pub last_fused_t_ns: i64,
+    /// Time of the first rejection of the current run of rejections, ns.
+    pub first_reject_t_ns: i64,
+}
+
+impl InnovDiag {
+    /// A fresh record (never fused).
+    pub fn new() -> Self {
+        Self {
+            last_fused_t_ns: i64::MIN,
+            first_reject_t_ns: i64::MIN,
+            ..Default::default()
+        }
+    }
+
+    /// Whether this source was fused within `timeout_ns` of `t_ns`.
+    pub fn active(&self, t_ns: i64, timeout_ns: i64) -> bool {
+        self.last_fused_t_ns != i64::MIN && t_ns - self.last_fused_t_ns <= timeout_ns
+    }
+}
+
+/// The chi-square gate for `dof` degrees of freedom at the normal quantile `z`
+/// (Wilson–Hilferty approximation, within 3 % of the exact quantile for dof ≥ 1 and z ≈ 3).
+pub fn chi2_gate(dof: usize, z: f64) -> f64 {
+    let k = dof as f64;
+    let c = 2.0 / (9.0 * k);
+    k * (1.0 - c + z * c.sqrt()).powi(3)
+}
+
+/// Outcome of a gated update.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum UpdateOutcome {
+    /// Fused; the correction to inject.
+    Fused(ErrVec),
+    /// Rejected by the innovation gate.
+    Rejected,
+    /// Numerically unusable (S not positive definite).
+    Singular,
+}
+
+/// A gated Kalman update of dimension `M`: computes `S = H P Hᵀ + R`, the test ratio
+/// `yᵀ S⁻¹ y / χ²_gate(M)`, and, when it passes (or `force`), `K = P Hᵀ S⁻¹`, `P ← P − K S Kᵀ`.
+/// Diagnostics are written to `diag`; `P` is untouched on rejection.
+#[allow(clippy::too_many_arguments)]
+pub fn gated_update<const M: usize>(
+    p: &mut Cov,
+    h: &SMatrix<f64, M, N>,
+    r: &SMatrix<f64, M, M>,
+    y: &SVector<f64, M>,
+    gate_sigma: f64,
+    t_ns: i64,
+    force: bool,
+    diag: &mut InnovDiag,
+) -> UpdateOutcome {
+    let pht: SMatrix<f64, N, M> = *p * h.transpose();
+    let s = h * pht + r;
+    let Some(chol) = s.cholesky() else {
+        return UpdateOutcome::Singular;
+    };
+    let s_inv_y = chol.solve(y);
+    let nis = y.dot(&s_inv_y);
+    diag.innov = [0.0; 3];
+    diag.innov_var = [0.0; 3];
+    for k in 0..M.min(3) {
+        diag.innov[k] = y[k];
+        diag.innov_var[k] = s[(k, k)];
+    }
+    diag.test_ratio = nis / chi2_gate(M, gate_sigma);
+    if !force && (diag.test_ratio > 1.0 || !nis.is_finite()) {
+        diag.rejected += 1;
+        if diag.consecutive_rejects == 0 {
+            diag.first_reject_t_ns = t_ns;
+        }
+        diag.consecutive_rejects += 1;
+        return UpdateOutcome::Rejected;
+    }
+    // K = P Hᵀ S⁻¹  ⇔  Kᵀ = S⁻¹ H P.
+    let kt = chol.solve(&pht.transpose());
+    let k = kt.transpose();
+    let dx = k * y;
+    *p -= k * pht.transpose();
+    symmetrize(p);
+    diag.fused += 1;
+    diag.consecutive_rejects = 0;
+    diag.last_fused_t_ns = t_ns;
+    UpdateOutcome::Fused(dx)
+}

@@ -1,0 +1,574 @@
+//! The error-state EKF (profile `eskf`): the nominal state runs at the fusion horizon, a fixed delay
+//! behind the newest IMU sample; buffered measurements are fused at their own time of validity;
+//! the [`OutputPredictor`] carries the state forward to every IMU sample.
+
+use std::collections::VecDeque;
+
+use nalgebra::{Isometry3, Matrix3, Vector3};
+use uavnav_core::{Egomotion, ImuSample, Lla, LocalFrame, MotionPrior, VehicleConfig};
+
+use crate::aid_sources::gnss_pos::{GnssMeas, GnssPosSource, white_noise};
+use crate::aid_sources::gnss_vel::GnssVelSource;
+use crate::aid_sources::vision::{VisionSource, VisionUse};
+use crate::buffer::{DelayBuffer, Event};
+use crate::health::{Health, Mode};
+use crate::init::{Initialiser, yaw_from_course};
+use crate::output::{AidingFlags, PoseOutput, euler_sigma};
+use crate::output_predictor::{OutputPredictor, mean_of};
+use crate::params::EstimatorParams;
+use crate::prediction::{
+    ErrorDynamics, GravityCache, ImuMean, ProcessNoise, earth_rate_ned, integrate_nominal,
+};
+use crate::state::{Cov, ErrVec, IP, ITH, IV, N, Nominal, PoseClone, augment_clone, clear_clone};
+
+/// Covariance-prediction accumulator (PX4 downsampling of the covariance prediction).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+struct CovAccum {
+    dt_s: f64,
+    gyro_dt: Vector3<f64>,
+    accel_dt: Vector3<f64>,
+}
+
+/// The error-state EKF.
+#[derive(Debug, Clone)]
+pub struct Eskf {
+    params: EstimatorParams,
+    lever_b: Vector3<f64>,
+    body_from_cam: Option<Isometry3<f64>>,
+    gyro_psd: f64,
+    noise: ProcessNoise,
+    origin: Option<Lla>,
+    frame: Option<LocalFrame>,
+    w_ie: Vector3<f64>,
+    gravity: Option<GravityCache>,
+    /// IMU samples from the horizon sample (front, already integrated) to the newest.
+    imu: VecDeque<ImuSample>,
+    x: Option<Nominal>,
+    p: Cov,
+    acc: CovAccum,
+    buffer: DelayBuffer,
+    init: Initialiser,
+    yaw_aligned: bool,
+    gnss_pos: GnssPosSource,
+    gnss_vel: GnssVelSource,
+    vision: VisionSource,
+    out: OutputPredictor,
+    late_dropped: u64,
+    corrected: bool,
+}
+
+/// Linear interpolation of two IMU samples at `t_ns`.
+pub fn interp(a: &ImuSample, b: &ImuSample, t_ns: i64) -> ImuSample {
+    if b.t_ns == a.t_ns {
+        return *b;
+    }
+    let w = (t_ns - a.t_ns) as f64 / (b.t_ns - a.t_ns) as f64;
+    ImuSample {
+        t_ns,
+        gyro_radps: a.gyro_radps + (b.gyro_radps - a.gyro_radps) * w,
+        accel_mps2: a.accel_mps2 + (b.accel_mps2 - a.accel_mps2) * w,
+    }
+}
+
+impl Eskf {
+    /// A filter for one vehicle; `origin` fixes the local frame (else the first GNSS fix does).
+    pub fn new(config: &VehicleConfig, params: EstimatorParams, origin: Option<Lla>) -> Self {
+        let imu = &config.imu;
+        let noise = ProcessNoise {
+            gyro_psd: imu.gyro_noise_density.powi(2),
+            accel_psd: imu.accel_noise_density.powi(2),
+            gyro_bias_psd: imu.gyro_random_walk.powi(2),
+            accel_bias_psd: imu.accel_random_walk.powi(2),
+            gm_psd: [0.0; 3],
+            gm_tau_s: params.gnss_pos_tau_s,
+        };
+        let mut s = Self {
+            lever_b: config
+                .gnss
+                .map(|g| g.lever_arm_body_m)
+                .unwrap_or_else(Vector3::zeros),
+            body_from_cam: config.camera.as_ref().map(|c| c.body_from_cam),
+            gyro_psd: noise.gyro_psd,
+            noise,
+            origin,
+            frame: None,
+            w_ie: Vector3::zeros(),
+            gravity: None,
+            imu: VecDeque::new(),
+            x: None,
+            p: Cov::zeros(),
+            acc: CovAccum::default(),
+            buffer: DelayBuffer::default(),
+            init: Initialiser::default(),
+            yaw_aligned: false,
+            gnss_pos: GnssPosSource::default(),
+            gnss_vel: GnssVelSource::default(),
+            vision: VisionSource::default(),
+            out: OutputPredictor::new(),
+            late_dropped: 0,
+            corrected: false,
+            params,
+        };
+        if let Some(o) = origin {
+            s.set_frame(o);
+        }
+        s
+    }
+
+    /// Back to the state right after `new` (same configuration and origin).
+    pub fn reset(&mut self) {
+        let fresh = Self {
+            lever_b: self.lever_b,
+            body_from_cam: self.body_from_cam,
+            gyro_psd: self.gyro_psd,
+            noise: self.noise,
+            origin: self.origin,
+            frame: None,
+            w_ie: Vector3::zeros(),
+            gravity: None,
+            imu: VecDeque::new(),
+            x: None,
+            p: Cov::zeros(),
+            acc: CovAccum::default(),
+            buffer: DelayBuffer::default(),
+            init: Initialiser::default(),
+            yaw_aligned: false,
+            gnss_pos: GnssPosSource::default(),
+            gnss_vel: GnssVelSource::default(),
+            vision: VisionSource::default(),
+            out: OutputPredictor::new(),
+            late_dropped: 0,
+            corrected: false,
+            params: self.params.clone(),
+        };
+        *self = fresh;
+        if let Some(o) = self.origin {
+            self.set_frame(o);
+        }
+    }
+
+    fn set_frame(&mut self, origin: Lla) {
+        self.frame = Some(LocalFrame::new(origin));
+        self.w_ie = earth_rate_ned(origin.lat_rad);
+    }
+
+    /// The local frame, once known.
+    pub fn frame(&self) -> Option<&LocalFrame> {
+        self.frame.as_ref()
+    }
+
+    /// Time of the fusion horizon (the oldest retained IMU sample).
+    pub fn horizon_t_ns(&self) -> Option<i64> {
+        self.imu.front().map(|s| s.t_ns)
+    }
+
+    /// The horizon nominal state (for tests and diagnostics).
+    pub fn nominal(&self) -> Option<&Nominal> {
+        self.x.as_ref()
+    }
+
+    /// The error covariance at the horizon.
+    pub fn covariance(&self) -> &Cov {
+        &self.p
+    }
+
+    /// Adds a GNSS fix (already validated) to the delay buffer.
+    pub fn push_gnss(&mut self, fix: &uavnav_core::GnssFix) {
+        let lla = Lla::from_deg(fix.lat_deg, fix.lon_deg, fix.alt_m);
+        if self.frame.is_none() {
+            self.set_frame(lla);
+        }
+        let Some(frame) = self.frame.as_ref() else {
+            return;
+        };
+        if self.horizon_t_ns().is_some_and(|h| fix.t_ns <= h) {
+            self.late_dropped += 1;
+            return;
+        }
+        let meas = GnssMeas {
+            t_ns: fix.t_ns,
+            pos_ned_m: frame.lla_to_ned(&lla),
+            vel_ned_mps: fix.vel_ned_mps,
+            sigma_h_m: fix.sigma_h_m,
+            sigma_v_m: fix.sigma_v_m,
+            sigma_vel_mps: fix.sigma_vel_mps,
+        };
+        if self.gnss_pos.diag.fused == 0 && self.x.is_none() {
+            // The Gauss–Markov strength follows the receiver's reported accuracy at start.
+            let f = self.params.gnss_pos_correlated_fraction;
+            let tau = self.params.gnss_pos_tau_s;
+            let (h2, v2) = (f * fix.sigma_h_m.powi(2), f * fix.sigma_v_m.powi(2));
+            self.noise.gm_psd = [2.0 * h2 / tau, 2.0 * h2 / tau, 2.0 * v2 / tau];
+        }
+        if !self.buffer.push(Event::Gnss(meas)) {
+            self.late_dropped += 1;
+        }
+    }
+
+    /// Adds a vision egomotion (already validated) to the delay buffer.
+    pub fn push_egomotion(&mut self, m: &Egomotion) {
+        let h = self.horizon_t_ns();
+        if self.body_from_cam.is_none() || h.is_some_and(|h| m.t1_ns <= h) {
+            self.late_dropped += 1;
+            return;
+        }
+        let clone_ok = self
+            .x
+            .as_ref()
+            .and_then(|x| x.clone)
+            .is_some_and(|c| c.t_ns == m.t0_ns);
+        if h.is_none_or(|h| m.t0_ns > h) && !self.buffer.has_clone_at(m.t0_ns) && !clone_ok {
+            self.buffer.push(Event::CloneAt(m.t0_ns));
+        }
+        if !self.buffer.push(Event::Ego(Box::new(m.clone()))) {
+            self.late_dropped += 1;
+        }
+    }
+
+    /// Adds an IMU sample (already validated, strictly newer than the last) and returns the pose
+    /// at its time once initialised.
+    pub fn push_imu(&mut self, s: &ImuSample) -> Option<PoseOutput> {
+        let prev_newest = self.imu.back().copied();
+        self.imu.push_back(*s);
+        if self.imu.len() == 1 {
+            self.init.add_imu(
+                s.t_ns,
+                &s.gyro_radps,
+                &s.accel_mps2,
+                self.params.init_level_window_s,
+            );
+        }
+        self.corrected = false;
+        let target = s.t_ns - self.params.fusion_delay_ns;
+        while self.imu.len() >= 2 && self.imu[1].t_ns <= target {
+            self.step();
+        }
+        let frame = self.frame?;
+        let x = self.x?;
+        let tau = self.params.gnss_pos_tau_s;
+        if self.corrected || self.out.x.is_none() {
+            self.out
+                .resync(&frame, &x, self.imu.iter(), &self.w_ie, tau);
+        } else if let Some(prev) = prev_newest {
+            if let Some(o) = self.out.x.as_mut() {
+                o.bg = x.bg;
+                o.ba = x.ba;
+            }
+            self.out.advance(&frame, &prev, s, &self.w_ie, tau);
+        }
+        self.output()
+    }
+
+    /// Advances the horizon by one IMU interval, processing the events inside it.
+    fn step(&mut self) {
+        let (a, b) = (self.imu[0], self.imu[1]);
+        while let Some(e) = self.buffer.pop_until(b.t_ns) {
+            let t = e.t_ns().max(a.t_ns);
+            self.integrate_to(&a, &b, t);
+            self.process(e, &a, &b);
+        }
+        self.integrate_to(&a, &b, b.t_ns);
+        self.imu.pop_front();
+        if self.x.is_none() {
+            self.init.add_imu(
+                b.t_ns,
+                &b.gyro_radps,
+                &b.accel_mps2,
+                self.params.init_level_window_s,
+            );
+        }
+    }
+
+    /// Integrates the nominal state to `t_ns` within the IMU interval `[a, b]`.
+    fn integrate_to(&mut self, a: &ImuSample, b: &ImuSample, t_ns: i64) {
+        let (Some(x), Some(frame)) = (self.x.as_mut(), self.frame.as_ref()) else {
+            return;
+        };
+        if t_ns <= x.t_ns {
+            return;
+        }
+        let s0 = interp(a, b, x.t_ns);
+        let s1 = interp(a, b, t_ns);
+        let m = mean_of(&s0, &s1);
+        let dt_s = (t_ns - x.t_ns) as f64 * 1e-9;
+        let g = self
+            .gravity
+            .get_or_insert_with(|| GravityCache::new(frame, &x.p))
+            .at(frame, &x.p);
+        integrate_nominal(x, &m, dt_s, &g, &self.w_ie, self.params.gnss_pos_tau_s);
+        x.t_ns = t_ns;
+        self.acc.dt_s += dt_s;
+        self.acc.gyro_dt += m.gyro * dt_s;
+        self.acc.accel_dt += m.accel * dt_s;
+        if self.acc.dt_s >= self.params.cov_period_s {
+            self.flush_cov();
+        }
+    }
+
+    /// Propagates the covariance over the accumulated interval.
+    fn flush_cov(&mut self) {
+        let Some(x) = self.x.as_ref() else { return };
+        if self.acc.dt_s <= 0.0 {
+            return;
+        }
+        let dt = self.acc.dt_s;
+        let mean = ImuMean {
+            gyro: self.acc.gyro_dt / dt,
+            accel: self.acc.accel_dt / dt,
+        };
+        ErrorDynamics::new(x, &mean, &self.w_ie, self.params.gnss_pos_tau_s).propagate(
+            &mut self.p,
+            dt,
+            &self.noise,
+        );
+        self.acc = CovAccum::default();
+    }
+
+    fn inject(&mut self, dx: Option<ErrVec>) {
+        if let (Some(dx), Some(x)) = (dx, self.x.as_mut()) {
+            x.inject(&dx);
+            self.corrected = true;
+        }
+    }
+
+    /// Handles one buffered event at the horizon (state already integrated to its time).
+    fn process(&mut self, e: Event, a: &ImuSample, b: &ImuSample) {
+        if self.x.is_none() {
+            if let Event::Gnss(m) = e {
+                self.try_init(&m);
+            }
+            return;
+        }
+        self.flush_cov();
+        match e {
+            Event::Gnss(m) => self.fuse_gnss(&m, &interp(a, b, m.t_ns)),
+            Event::CloneAt(t) => self.take_clone(t),
+            Event::Ego(m) => self.fuse_vision(&m),
+        }
+    }
+
+    fn try_init(&mut self, m: &GnssMeas) {
+        let Some(frame) = self.frame.as_ref() else {
+            return;
+        };
+        let g = frame.gravity_ned(&m.pos_ned_m);
+        let f = self.params.gnss_pos_correlated_fraction.max(0.0);
+        let gm_sigma = [
+            f.sqrt() * m.sigma_h_m,
+            f.sqrt() * m.sigma_h_m,
+            f.sqrt() * m.sigma_v_m,
+        ];
+        if let Some(r) = self
+            .init
+            .try_init(m, &self.lever_b, &g, &self.params, gm_sigma)
+        {
+            self.x = Some(r.x);
+            self.p = r.p;
+            self.yaw_aligned = r.yaw_aligned;
+            self.acc = CovAccum::default();
+            self.corrected = true;
+        }
+    }
+
+    fn fuse_gnss(&mut self, m: &GnssMeas, imu: &ImuSample) {
+        let Some(x) = self.x else { return };
+        if !self.yaw_aligned && m.vel_ned_mps.xy().norm() >= self.params.init_min_speed_mps {
+            if let Some(xm) = self.x.as_mut() {
+                yaw_from_course(xm, &mut self.p, &m.vel_ned_mps, &self.params);
+            }
+            self.yaw_aligned = true;
+            self.corrected = true;
+        }
+        let r = white_noise(
+            m,
+            self.params.gnss_pos_correlated_fraction,
+            self.params.gnss_pos_white_min_m,
+        );
+        let (gate, reset) = (self.params.gate_sigma, self.params.gnss_reset_timeout_ns);
+        let dx = self
+            .gnss_pos
+            .fuse(&x, &mut self.p, &self.lever_b, m, &r, gate, reset);
+        self.inject(dx);
+        let Some(x) = self.x else { return };
+        let dx = self.gnss_vel.fuse(
+            &x,
+            &mut self.p,
+            &self.lever_b,
+            &imu.gyro_radps,
+            &self.w_ie,
+            m,
+            gate,
+            reset,
+        );
+        self.inject(dx);
+    }
+
+    fn take_clone(&mut self, t_ns: i64) {
+        if let Some(x) = self.x.as_mut() {
+            x.clone = Some(PoseClone {
+                t_ns,
+                q: x.q,
+                p: x.p,
+            });
+            augment_clone(&mut self.p);
+        }
+    }
+
+    fn fuse_vision(&mut self, m: &Egomotion) {
+        let (Some(x), Some(bfc)) = (self.x, self.body_from_cam) else {
+            return;
+        };
+        let use_ = VisionUse {
+            rotation: self.params.use_vision_rotation,
+            translation: self.params.use_vision_translation,
+            cov_scale: self.params.vision_cov_scale,
+            gate_sigma: self.params.gate_sigma,
+        };
+        match x.clone {
+            Some(c0) if c0.t_ns == m.t0_ns => {
+                if use_.rotation {
+                    let dx = self
+                        .vision
+                        .fuse_rotation(&x, &c0, &mut self.p, &bfc, m, &use_);
+                    self.inject(dx);
+                }
+                if use_.translation {
+                    if let Some(x) = self.x {
+                        if let Some(c0) = x.clone {
+                            let dx =
+                                self.vision
+                                    .fuse_translation(&x, &c0, &mut self.p, &bfc, m, &use_);
+                            self.inject(dx);
+                        }
+                    }
+                }
+            }
+            _ => self.vision.no_clone += 1,
+        }
+        // Chain: the next egomotion normally starts at this frame.
+        let needed = x.clone.map(|c| c.t_ns);
+        if !needed.is_some_and(|t| self.buffer_needs_clone(t)) {
+            clear_clone(&mut self.p);
+            self.take_clone(m.t1_ns);
+        }
+    }
+
+    fn buffer_needs_clone(&self, t0_ns: i64) -> bool {
+        // A pending egomotion from the current clone's time still needs that clone.
+        self.buffer_pending_ego_t0().contains(&t0_ns)
+    }
+
+    fn buffer_pending_ego_t0(&self) -> Vec<i64> {
+        self.buffer.pending_ego_t0()
+    }
+
+    /// The current mode.
+    pub fn mode(&self) -> Mode {
+        let Some(x) = self.x.as_ref() else {
+            return Mode::Initialising;
+        };
+        let pos_var = self.p[(IP, IP)] + self.p[(IP + 1, IP + 1)];
+        if !x.is_finite()
+            || !pos_var.is_finite()
+            || pos_var.sqrt() > self.params.diverged_pos_sigma_m
+        {
+            return Mode::Diverged;
+        }
+        let to = self.params.aid_timeout_ns;
+        if self.gnss_pos.diag.active(x.t_ns, to) {
+            Mode::Nominal
+        } else if self.vision.trans.active(x.t_ns, to) || self.vision.rot.active(x.t_ns, to) {
+            Mode::GnssDeniedVision
+        } else {
+            Mode::InertialOnly
+        }
+    }
+
+    /// Health at the current horizon.
+    pub fn health(&self) -> Health {
+        let mut cov_diag = [0.0; N];
+        for (k, c) in cov_diag.iter_mut().enumerate() {
+            *c = self.p[(k, k)];
+        }
+        Health {
+            mode: self.mode(),
+            gnss_pos: self.gnss_pos.diag,
+            gnss_vel: self.gnss_vel.diag,
+            vision_rot: self.vision.rot,
+            vision_trans: self.vision.trans,
+            inputs_rejected: 0,
+            late_dropped: self.late_dropped,
+            vision_no_clone: self.vision.no_clone,
+            gnss_resets: self.gnss_pos.resets + self.gnss_vel.resets,
+            cov_diag,
+        }
+    }
+
+    fn output(&self) -> Option<PoseOutput> {
+        let o = self.out.x.as_ref()?;
+        let frame = self.frame.as_ref()?;
+        let x = self.x.as_ref()?;
+        let to = self.params.aid_timeout_ns;
+        let d = |i: usize| {
+            Vector3::new(
+                self.p[(i, i)],
+                self.p[(i + 1, i + 1)],
+                self.p[(i + 2, i + 2)],
+            )
+            .map(|v| v.max(0.0).sqrt())
+        };
+        let cov_th: Matrix3<f64> = self.p.fixed_view::<3, 3>(ITH, ITH).into_owned();
+        let (r, p_, y) = o.q.euler_angles();
+        Some(PoseOutput {
+            t_ns: o.t_ns,
+            lla: frame.ned_to_lla(&o.p),
+            pos_ned_m: o.p,
+            vel_ned_mps: o.v,
+            nav_from_body: o.q,
+            euler_rad: Vector3::new(r, p_, y),
+            sigma_pos_ned_m: d(IP),
+            sigma_vel_mps: d(IV),
+            sigma_att_rad: euler_sigma(&o.q, &cov_th),
+            gyro_bias_radps: x.bg,
+            accel_bias_mps2: x.ba,
+            health: self.health(),
+            aiding: AidingFlags {
+                gnss_pos: self.gnss_pos.diag.active(x.t_ns, to),
+                gnss_vel: self.gnss_vel.diag.active(x.t_ns, to),
+                vision_rot: self.vision.rot.active(x.t_ns, to),
+                vision_trans: self.vision.trans.active(x.t_ns, to),
+            },
+        })
+    }
+
+    /// The prior for the vision front end between frame times `t0_ns < t1_ns` (see
+    /// [`MotionPrior`]); fields are `None` where the filter cannot tell.
+    pub fn motion_prior(&self, t0_ns: i64, t1_ns: i64, terrain_elevation_m: f64) -> MotionPrior {
+        let (Some(bfc), Some(o), Some(frame)) =
+            (self.body_from_cam, self.out.x.as_ref(), self.frame.as_ref())
+        else {
+            return MotionPrior::default();
+        };
+        let bias_sigma = self.p[(crate::state::IBG, crate::state::IBG)]
+            .max(0.0)
+            .sqrt();
+        let now = crate::motion_prior::NowState {
+            t_ns: o.t_ns,
+            q: o.q,
+            p: o.p,
+            v: o.v,
+            bg: o.bg,
+        };
+        crate::motion_prior::prior(
+            &self.imu,
+            &bfc,
+            frame,
+            &now,
+            t0_ns,
+            t1_ns,
+            terrain_elevation_m,
+            self.gyro_psd.sqrt(),
+            bias_sigma,
+        )
+    }
+}

@@ -1,0 +1,178 @@
+//! [`Estimator`]: one vehicle's filter (either profile) behind input validation.
+
+use uavnav_core::{Egomotion, FilterProfile, GnssFix, ImuSample, Lla, MotionPrior, VehicleConfig};
+
+use crate::eskf::Eskf;
+use crate::health::Health;
+use crate::output::PoseOutput;
+use crate::paper::PaperFilter;
+use crate::params::EstimatorParams;
+use crate::validate::{InputError, check_egomotion, check_gnss, check_imu};
+
+/// Consecutive continuous samples after a rejected time jump that make the estimator accept the
+/// resumed stream by restarting (a genuine gap, not a glitch).
+pub const JUMP_RESTART_SAMPLES: u32 = 5;
+
+#[derive(Debug, Clone)]
+enum Profile {
+    Eskf(Box<Eskf>),
+    Paper(Box<PaperFilter>),
+}
+
+/// The estimator of one vehicle. Pure and synchronous: time comes with the data.
+#[derive(Debug, Clone)]
+pub struct Estimator {
+    profile: Profile,
+    params: EstimatorParams,
+    terrain_elevation_m: f64,
+    has_camera: bool,
+    last_imu_t_ns: Option<i64>,
+    last_gnss_t_ns: Option<i64>,
+    last_ego_t1_ns: Option<i64>,
+    /// Time of the last sample rejected for a time jump and how many continuous ones followed.
+    jump_run: Option<(i64, u32)>,
+    inputs_rejected: u64,
+}
+
+impl Estimator {
+    /// A filter for one vehicle with the profile named in `config.profile`; `origin` fixes the
+    /// local NED frame (else the first GNSS fix does).
+    pub fn new(config: &VehicleConfig, params: EstimatorParams, origin: Option<Lla>) -> Self {
+        let profile = match config.profile {
+            FilterProfile::Eskf => {
+                Profile::Eskf(Box::new(Eskf::new(config, params.clone(), origin)))
+            }
+            FilterProfile::Paper => {
+                Profile::Paper(Box::new(PaperFilter::new(config, params.clone(), origin)))
+            }
+        };
+        Self {
+            profile,
+            params,
+            terrain_elevation_m: config.terrain_elevation_m,
+            has_camera: config.camera.is_some(),
+            last_imu_t_ns: None,
+            last_gnss_t_ns: None,
+            last_ego_t1_ns: None,
+            jump_run: None,
+            inputs_rejected: 0,
+        }
+    }
+
+    /// The running profile.
+    pub fn profile(&self) -> FilterProfile {
+        match self.profile {
+            Profile::Eskf(_) => FilterProfile::Eskf,
+            Profile::Paper(_) => FilterProfile::Paper,
+        }
+    }
+
+    /// Adds an IMU sample; returns the pose at its time once initialised.
+    pub fn push_imu(&mut self, s: &ImuSample) -> Result<Option<PoseOutput>, InputError> {
+        if let Err(e) = check_imu(s, self.last_imu_t_ns, &self.params) {
+            self.inputs_rejected += 1;
+            if matches!(e, InputError::TimeJump { .. }) && self.note_jump(s.t_ns) {
+                self.restart_after_gap();
+            } else {
+                return Err(e);
+            }
+        }
+        self.jump_run = None;
+        self.last_imu_t_ns = Some(s.t_ns);
+        let out = match &mut self.profile {
+            Profile::Eskf(f) => f.push_imu(s),
+            Profile::Paper(f) => f.push_imu(s),
+        };
+        Ok(out.map(|mut o| {
+            o.health.inputs_rejected = self.inputs_rejected;
+            o
+        }))
+    }
+
+    /// Tracks samples after a time jump; true once the resumed stream is clearly continuous.
+    fn note_jump(&mut self, t_ns: i64) -> bool {
+        let run = match self.jump_run {
+            Some((last, n)) if t_ns > last && t_ns - last <= self.params.max_imu_gap_ns => n + 1,
+            _ => 1,
+        };
+        self.jump_run = Some((t_ns, run));
+        run >= JUMP_RESTART_SAMPLES
+    }
+
+    fn restart_after_gap(&mut self) {
+        let rejected = self.inputs_rejected;
+        self.reset();
+        self.inputs_rejected = rejected;
+    }
+
+    /// Adds a GNSS fix (fused at its own time, behind the newest IMU sample).
+    pub fn push_gnss(&mut self, f: &GnssFix) -> Result<(), InputError> {
+        if let Err(e) = check_gnss(f, self.last_gnss_t_ns, self.last_imu_t_ns, &self.params) {
+            self.inputs_rejected += 1;
+            return Err(e);
+        }
+        self.last_gnss_t_ns = Some(f.t_ns);
+        match &mut self.profile {
+            Profile::Eskf(e) => e.push_gnss(f),
+            Profile::Paper(p) => p.push_gnss(f),
+        }
+        Ok(())
+    }
+
+    /// Adds a vision egomotion measurement (fused at its frame times).
+    pub fn push_egomotion(&mut self, m: &Egomotion) -> Result<(), InputError> {
+        if !self.has_camera {
+            self.inputs_rejected += 1;
+            return Err(InputError::NoCamera);
+        }
+        if let Err(e) = check_egomotion(m, self.last_ego_t1_ns, self.last_imu_t_ns, &self.params) {
+            self.inputs_rejected += 1;
+            return Err(e);
+        }
+        self.last_ego_t1_ns = Some(m.t1_ns);
+        match &mut self.profile {
+            Profile::Eskf(e) => e.push_egomotion(m),
+            Profile::Paper(p) => p.push_egomotion(m),
+        }
+        Ok(())
+    }
+
+    /// The motion prior between two frame times for the vision front end.
+    pub fn motion_prior(&self, t0_ns: i64, t1_ns: i64) -> MotionPrior {
+        match &self.profile {
+            Profile::Eskf(e) => e.motion_prior(t0_ns, t1_ns, self.terrain_elevation_m),
+            Profile::Paper(p) => p.motion_prior(t0_ns, t1_ns, self.terrain_elevation_m),
+        }
+    }
+
+    /// Current health (also attached to every output).
+    pub fn health(&self) -> Health {
+        let mut h = match &self.profile {
+            Profile::Eskf(e) => e.health(),
+            Profile::Paper(p) => p.health(),
+        };
+        h.inputs_rejected = self.inputs_rejected;
+        h
+    }
+
+    /// The ESKF, when that profile runs (diagnostics and tests).
+    pub fn eskf(&self) -> Option<&Eskf> {
+        match &self.profile {
+            Profile::Eskf(e) => Some(e),
+            Profile::Paper(_) => None,
+        }
+    }
+
+    /// Forgets everything but the configuration and origin.
+    pub fn reset(&mut self) {
+        match &mut self.profile {
+            Profile::Eskf(e) => e.reset(),
+            Profile::Paper(p) => p.reset(),
+        }
+        self.last_imu_t_ns = None;
+        self.last_gnss_t_ns = None;
+        self.last_ego_t1_ns = None;
+        self.jump_run = None;
+        self.inputs_rejected = 0;
+    }
+}

@@ -1,0 +1,71 @@
+//! Pure line formatters for the CLI: the `poses.csv` row and the TUM trajectory line.
+
+use crate::output::PoseOutput;
+
+/// The mandatory leading columns of `poses.csv`, in order.
+pub const CSV_LEADING_COLUMNS: &str = "timestamp_ns,latitude_deg,longitude_deg,altitude_m,v_north_mps,v_east_mps,v_down_mps,qw,qx,qy,qz,roll_deg,pitch_deg,yaw_deg,sigma_north_m,sigma_east_m,sigma_down_m,sigma_roll_deg,sigma_pitch_deg,sigma_yaw_deg";
+
+/// Extra columns that follow the leading ones.
+pub const CSV_EXTRA_COLUMNS: &str = "mode,gnss_pos_test_ratio,gnss_vel_test_ratio,vision_rot_test_ratio,vision_trans_test_ratio,gnss_pos_rejected,gnss_vel_rejected,vision_rejected";
+
+/// The full header line (no newline).
+pub fn csv_header() -> String {
+    format!("{CSV_LEADING_COLUMNS},{CSV_EXTRA_COLUMNS}")
+}
+
+/// One `poses.csv` row (no newline): degrees at this edge, altitude above the ellipsoid, the
+/// quaternion `nav_from_body` (w first), ZYX Euler angles.
+pub fn csv_row(o: &PoseOutput) -> String {
+    let q = o.nav_from_body.quaternion();
+    let e = o.euler_rad.map(f64::to_degrees);
+    let se = o.sigma_att_rad.map(f64::to_degrees);
+    let h = &o.health;
+    format!(
+        "{},{:.9},{:.9},{:.4},{:.5},{:.5},{:.5},{:.9},{:.9},{:.9},{:.9},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{:.5},{:.5},{:.5},{},{:.4},{:.4},{:.4},{:.4},{},{},{}",
+        o.t_ns,
+        o.lla.lat_deg(),
+        o.lla.lon_deg(),
+        o.lla.alt_m,
+        o.vel_ned_mps.x,
+        o.vel_ned_mps.y,
+        o.vel_ned_mps.z,
+        q.w,
+        q.i,
+        q.j,
+        q.k,
+        e.x,
+        e.y,
+        e.z,
+        o.sigma_pos_ned_m.x,
+        o.sigma_pos_ned_m.y,
+        o.sigma_pos_ned_m.z,
+        se.x,
+        se.y,
+        se.z,
+        h.mode.as_str(),
+        h.gnss_pos.test_ratio,
+        h.gnss_vel.test_ratio,
+        h.vision_rot.test_ratio,
+        h.vision_trans.test_ratio,
+        h.gnss_pos.rejected,
+        h.gnss_vel.rejected,
+        h.vision_rot.rejected + h.vision_trans.rejected,
+    )
+}
+
+/// One TUM line `t_s x y z qx qy qz qw` (no newline): time in s, position in the estimator's local
+/// NED frame (its origin is the first GNSS fix unless an origin was given), `nav_from_body`.
+pub fn tum_line(o: &PoseOutput) -> String {
+    let q = o.nav_from_body.quaternion();
+    format!(
+        "{:.9} {:.4} {:.4} {:.4} {:.9} {:.9} {:.9} {:.9}",
+        o.t_ns as f64 * 1e-9,
+        o.pos_ned_m.x,
+        o.pos_ned_m.y,
+        o.pos_ned_m.z,
+        q.i,
+        q.j,
+        q.k,
+        q.w
+    )
+}

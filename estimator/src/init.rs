@@ -1,0 +1,168 @@
+//! Initialisation without operator input: level from averaged accelerometers (compensated by the
+//! GNSS-derived acceleration, so it also works in a turn), heading from the GNSS course when
+//! moving, position and velocity from the fix through the lever arm.
+//!
+//! On the ground (too slow for a course) the filter starts with yaw 0 and a wide yaw σ, and the
+//! heading is re-aligned from the course as soon as the vehicle moves ([`yaw_from_course`]).
+
+use std::collections::VecDeque;
+
+use nalgebra::{UnitQuaternion, Vector3};
+
+use crate::aid_sources::gnss_pos::GnssMeas;
+use crate::params::EstimatorParams;
+use crate::state::{Cov, IBA, IBG, IGM, IP, ITH, IV, Nominal};
+
+/// Yaw σ used before a course is available, rad (a wide prior; the linearisation is poor until
+/// the course re-alignment, which is why it happens as soon as the vehicle moves).
+pub const UNALIGNED_YAW_SIGMA_RAD: f64 = 1.0;
+
+/// Collects what the initial alignment needs.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Initialiser {
+    /// (t_ns, gyro, accel) of recent IMU samples at the fusion horizon.
+    samples: VecDeque<(i64, Vector3<f64>, Vector3<f64>)>,
+    /// The previous GNSS fix (for the acceleration).
+    prev_fix: Option<GnssMeas>,
+}
+
+/// The initial state and covariance, and whether the heading came from a course.
+#[derive(Debug, Clone, PartialEq)]
+pub struct InitResult {
+    /// Nominal state.
+    pub x: Nominal,
+    /// Covariance.
+    pub p: Cov,
+    /// Heading aligned from the GNSS course.
+    pub yaw_aligned: bool,
+}
+
+impl Initialiser {
+    /// Adds an IMU sample seen at the horizon, keeping the levelling window.
+    pub fn add_imu(&mut self, t_ns: i64, gyro: &Vector3<f64>, accel: &Vector3<f64>, window_s: f64) {
+        self.samples.push_back((t_ns, *gyro, *accel));
+        let keep_ns = (window_s * 1e9) as i64;
+        while self.samples.front().is_some_and(|s| t_ns - s.0 > keep_ns) {
+            self.samples.pop_front();
+        }
+    }
+
+    /// Tries to initialise at a GNSS fix. `g_n` is gravity at the fix.
+    pub fn try_init(
+        &mut self,
+        fix: &GnssMeas,
+        lever_b: &Vector3<f64>,
+        g_n: &Vector3<f64>,
+        params: &EstimatorParams,
+        gm_sigma_m: [f64; 3],
+    ) -> Option<InitResult> {
+        let prev = self.prev_fix.replace(*fix);
+        let (t_first, t_last) = (self.samples.front()?.0, self.samples.back()?.0);
+        if ((t_last - t_first) as f64) < 0.8 * params.init_level_window_s * 1e9 {
+            return None;
+        }
+        let n = self.samples.len() as f64;
+        let f_b = self.samples.iter().map(|s| s.2).sum::<Vector3<f64>>() / n;
+        let w_b = self.samples.iter().map(|s| s.1).sum::<Vector3<f64>>() / n;
+        // Kinematic acceleration from consecutive GNSS velocities (zero without a previous fix).
+        let a_n = match prev {
+            Some(p) if fix.t_ns > p.t_ns && fix.t_ns - p.t_ns < 2_000_000_000 => {
+                (fix.vel_ned_mps - p.vel_ned_mps) / ((fix.t_ns - p.t_ns) as f64 * 1e-9)
+            }
+            _ => Vector3::zeros(),
+        };
+        let speed_h = fix.vel_ned_mps.xy().norm();
+        let yaw_aligned = speed_h >= params.init_min_speed_mps;
+        let yaw = if yaw_aligned {
+            fix.vel_ned_mps.y.atan2(fix.vel_ned_mps.x)
+        } else {
+            0.0
+        };
+        let q = attitude_from_gravity(&f_b, &(g_n - a_n), yaw)?;
+        let c = q.to_rotation_matrix();
+        let p = fix.pos_ned_m - c * lever_b;
+        let v = fix.vel_ned_mps - c * w_b.cross(lever_b);
+        let x = Nominal {
+            t_ns: fix.t_ns,
+            p,
+            v,
+            q,
+            bg: Vector3::zeros(),
+            ba: Vector3::zeros(),
+            gm: Vector3::zeros(),
+            clone: None,
+        };
+        let yaw_sigma = if yaw_aligned {
+            params.init_yaw_sigma_rad
+        } else {
+            UNALIGNED_YAW_SIGMA_RAD
+        };
+        let mut cov = Cov::zeros();
+        let pos_var = [
+            fix.sigma_h_m.powi(2),
+            fix.sigma_h_m.powi(2),
+            fix.sigma_v_m.powi(2),
+        ];
+        for k in 0..3 {
+            cov[(IP + k, IP + k)] = pos_var[k].max(gm_sigma_m[k].powi(2));
+            cov[(IGM + k, IGM + k)] = gm_sigma_m[k].powi(2);
+            // p̂ = z − C r ⇒ δp = −(e_gnss + n): position and GNSS error start anti-correlated.
+            cov[(IP + k, IGM + k)] = -gm_sigma_m[k].powi(2);
+            cov[(IGM + k, IP + k)] = -gm_sigma_m[k].powi(2);
+            cov[(IV + k, IV + k)] = fix.sigma_vel_mps.powi(2).max(1e-4) * 4.0;
+            cov[(IBG + k, IBG + k)] = params.init_gyro_bias_sigma_radps.powi(2);
+            cov[(IBA + k, IBA + k)] = params.init_accel_bias_sigma_mps2.powi(2);
+        }
+        set_attitude_cov(&mut cov, params.init_tilt_sigma_rad, yaw_sigma);
+        Some(InitResult {
+            x,
+            p: cov,
+            yaw_aligned,
+        })
+    }
+}
+
+/// Sets the attitude block to diag(tilt², tilt², yaw²) and removes its correlations.
+pub fn set_attitude_cov(cov: &mut Cov, tilt_sigma: f64, yaw_sigma: f64) {
+    for k in 0..3 {
+        cov.row_mut(ITH + k).fill(0.0);
+        cov.column_mut(ITH + k).fill(0.0);
+    }
+    cov[(ITH, ITH)] = tilt_sigma.powi(2);
+    cov[(ITH + 1, ITH + 1)] = tilt_sigma.powi(2);
+    cov[(ITH + 2, ITH + 2)] = yaw_sigma.powi(2);
+}
+
+/// `nav_from_body` such that the body specific force `f_b` maps onto `−g_app_n` (apparent gravity
+/// = gravity − kinematic acceleration) and the heading is `yaw`. `None` in free fall.
+pub fn attitude_from_gravity(
+    f_b: &Vector3<f64>,
+    g_app_n: &Vector3<f64>,
+    yaw: f64,
+) -> Option<UnitQuaternion<f64>> {
+    if f_b.norm() < 1.0 || g_app_n.norm() < 1.0 {
+        return None;
+    }
+    let roll = (-f_b.y).atan2(-f_b.z);
+    let pitch = f_b.x.atan2((f_b.y * f_b.y + f_b.z * f_b.z).sqrt());
+    let level = UnitQuaternion::from_euler_angles(roll, pitch, 0.0);
+    let heading = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw);
+    let tilt = UnitQuaternion::rotation_between(&Vector3::z(), &g_app_n.normalize())
+        .unwrap_or_else(UnitQuaternion::identity);
+    Some(tilt * heading * level)
+}
+
+/// Re-aligns the heading to the GNSS course keeping roll and pitch (used once the vehicle moves
+/// after a static start); resets the attitude covariance.
+pub fn yaw_from_course(
+    x: &mut Nominal,
+    cov: &mut Cov,
+    vel_ned: &Vector3<f64>,
+    params: &EstimatorParams,
+) {
+    let (roll, pitch, _) = x.q.euler_angles();
+    let yaw = vel_ned.y.atan2(vel_ned.x);
+    x.q = UnitQuaternion::from_euler_angles(roll, pitch, yaw);
+    let tilt = cov[(ITH, ITH)].max(cov[(ITH + 1, ITH + 1)]).sqrt();
+    set_attitude_cov(cov, tilt, params.init_yaw_sigma_rad);
+}

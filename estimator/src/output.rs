@@ -1,0 +1,72 @@
+//! The estimator's per-IMU-sample output.
+
+use nalgebra::{UnitQuaternion, Vector3};
+use uavnav_core::Lla;
+
+use crate::health::Health;
+
+/// Which aiding sources contributed recently (within the aid timeout).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct AidingFlags {
+    /// GNSS position fused recently.
+    pub gnss_pos: bool,
+    /// GNSS velocity fused recently.
+    pub gnss_vel: bool,
+    /// Vision rotation fused recently.
+    pub vision_rot: bool,
+    /// Vision translation fused recently.
+    pub vision_trans: bool,
+}
+
+/// One pose estimate, at an IMU sample time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseOutput {
+    /// Time, ns (the IMU sample's).
+    pub t_ns: i64,
+    /// Geodetic position of the body (IMU) origin.
+    pub lla: Lla,
+    /// Position in the local NED frame, m.
+    pub pos_ned_m: Vector3<f64>,
+    /// Velocity, NED, m/s.
+    pub vel_ned_mps: Vector3<f64>,
+    /// Rotation of body vectors into NED.
+    pub nav_from_body: UnitQuaternion<f64>,
+    /// Roll, pitch, yaw (ZYX), rad.
+    pub euler_rad: Vector3<f64>,
+    /// 1-σ position, NED, m.
+    pub sigma_pos_ned_m: Vector3<f64>,
+    /// 1-σ velocity, NED, m/s.
+    pub sigma_vel_mps: Vector3<f64>,
+    /// 1-σ roll, pitch, yaw, rad.
+    pub sigma_att_rad: Vector3<f64>,
+    /// Estimated gyro bias, rad/s (zero for the paper profile).
+    pub gyro_bias_radps: Vector3<f64>,
+    /// Estimated accelerometer bias, m/s² (zero for the paper profile).
+    pub accel_bias_mps2: Vector3<f64>,
+    /// Filter health.
+    pub health: Health,
+    /// Recently fused sources.
+    pub aiding: AidingFlags,
+}
+
+/// The paper's eq. (31) matrix `J(φ, θ)`: ZYX Euler-angle rates from body angular rates,
+/// `[φ̇ θ̇ ψ̇]ᵀ = J ω_nb^b`. Singular at θ = ±90°.
+pub fn euler_rate_matrix(roll: f64, pitch: f64) -> nalgebra::Matrix3<f64> {
+    let (sr, cr) = roll.sin_cos();
+    let (sp, cp) = pitch.sin_cos();
+    let tp = sp / cp;
+    nalgebra::Matrix3::new(1.0, sr * tp, cr * tp, 0.0, cr, -sr, 0.0, sr / cp, cr / cp)
+}
+
+/// Roll/pitch/yaw σ from the global (NED) attitude-error covariance:
+/// `δ(φ,θ,ψ) = J(φ,θ) Cᵀ δθⁿ` (a nav-frame error is the body-frame error `Cᵀ δθⁿ`).
+pub fn euler_sigma(q: &UnitQuaternion<f64>, cov_th: &nalgebra::Matrix3<f64>) -> Vector3<f64> {
+    let (roll, pitch, _) = q.euler_angles();
+    let m = euler_rate_matrix(roll, pitch) * q.to_rotation_matrix().matrix().transpose();
+    let c = m * cov_th * m.transpose();
+    Vector3::new(
+        c[(0, 0)].max(0.0).sqrt(),
+        c[(1, 1)].max(0.0).sqrt(),
+        c[(2, 2)].max(0.0).sqrt(),
+    )
+}

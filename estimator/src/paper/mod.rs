@@ -1,0 +1,441 @@
+//! Profile `paper`: the three-EKF architecture of the paper (section V, Fig. 1), kept as documented:
+//! Euler-angle attitude and the three-filter split, no bias states, no delay compensation beyond a
+//! short attitude history for the late video.
+//!
+//! | module | filter |
+//! |---|---|
+//! | [`attitude`] | VIDEO-IMU(1): Euler angles from gyro rates (eq. 31) + video pseudo-attitude (eq. 34) |
+//! | [`posvel`] | GPS-IMU (eqs. 29, 30, 32, 33) and VIDEO-IMU(2) (eq. 35): position/velocity EKFs |
+//!
+//! Without video the paper's "IMU+GPS estimation" must still get attitude from somewhere: here the
+//! VIDEO-IMU(1) filter then fuses a GNSS-derived attitude — roll/pitch from the accelerometers
+//! compensated by the GNSS acceleration, yaw from the GNSS course (assumes no sideslip/crab) — with
+//! σ of a few degrees. This is our reading, not the paper's text; it is what makes the GNSS-only
+//! paper baseline as coarse (degrees) as the paper's Figures 2–3 show.
+
+pub mod attitude;
+pub mod posvel;
+
+use std::collections::VecDeque;
+
+use nalgebra::{Isometry3, Matrix3, Vector3};
+use uavnav_core::{Egomotion, GnssFix, ImuSample, Lla, LocalFrame, MotionPrior, VehicleConfig};
+
+use crate::aid_sources::gnss_pos::GnssMeas;
+use crate::health::{Health, Mode};
+use crate::init::attitude_from_gravity;
+use crate::output::{AidingFlags, PoseOutput};
+use crate::output_predictor::mean_of;
+use crate::params::EstimatorParams;
+use crate::prediction::{GravityCache, earth_rate_ned};
+use attitude::AttitudeEkf;
+use posvel::PosVelEkf;
+
+/// Video older than this no longer counts as "video available" for the attitude aiding choice, ns.
+const VIDEO_TIMEOUT_NS: i64 = 1_000_000_000;
+/// No GNSS for this long activates VIDEO-IMU(2), ns.
+const OUTAGE_AFTER_NS: i64 = 1_000_000_000;
+/// σ of the GNSS-derived tilt and course pseudo-measurements, rad.
+const GNSS_TILT_SIGMA_RAD: f64 = 0.035;
+const GNSS_COURSE_SIGMA_RAD: f64 = 0.05;
+
+/// The paper's three filters.
+#[derive(Debug, Clone)]
+pub struct PaperFilter {
+    params: EstimatorParams,
+    lever_b: Vector3<f64>,
+    body_from_cam: Option<Isometry3<f64>>,
+    gyro_psd: f64,
+    accel_psd: f64,
+    origin: Option<Lla>,
+    frame: Option<LocalFrame>,
+    w_ie: Vector3<f64>,
+    gravity: Option<GravityCache>,
+    imu: VecDeque<ImuSample>,
+    att: Option<AttitudeEkf>,
+    gps_imu: Option<PosVelEkf>,
+    vio2: Option<PosVelEkf>,
+    last_speed_mps: f64,
+    last_fix: Option<(GnssMeas, Vector3<f64>)>,
+    last_video_t_ns: i64,
+    f_sum: (Vector3<f64>, u32),
+    init_f: VecDeque<Vector3<f64>>,
+    health: Health,
+    /// Diagnostics of the GNSS-derived attitude aiding (no-video case).
+    gnss_att_diag: crate::aid_sources::InnovDiag,
+}
+
+impl PaperFilter {
+    /// The three filters for one vehicle.
+    pub fn new(config: &VehicleConfig, params: EstimatorParams, origin: Option<Lla>) -> Self {
+        let mut s = Self {
+            params,
+            lever_b: config
+                .gnss
+                .map(|g| g.lever_arm_body_m)
+                .unwrap_or_else(Vector3::zeros),
+            body_from_cam: config.camera.as_ref().map(|c| c.body_from_cam),
+            gyro_psd: config.imu.gyro_noise_density.powi(2),
+            accel_psd: config.imu.accel_noise_density.powi(2),
+            origin,
+            frame: None,
+            w_ie: Vector3::zeros(),
+            gravity: None,
+            imu: VecDeque::new(),
+            att: None,
+            gps_imu: None,
+            vio2: None,
+            last_speed_mps: 0.0,
+            last_fix: None,
+            last_video_t_ns: i64::MIN,
+            f_sum: (Vector3::zeros(), 0),
+            init_f: VecDeque::new(),
+            health: Health::default(),
+            gnss_att_diag: crate::aid_sources::InnovDiag::new(),
+        };
+        if let Some(o) = origin {
+            s.set_frame(o);
+        }
+        s
+    }
+
+    fn set_frame(&mut self, o: Lla) {
+        self.frame = Some(LocalFrame::new(o));
+        self.w_ie = earth_rate_ned(o.lat_rad);
+    }
+
+    /// Back to the state right after `new`.
+    pub fn reset(&mut self) {
+        let cfg_frame = self.origin;
+        let mut fresh = self.clone();
+        fresh.frame = None;
+        fresh.gravity = None;
+        fresh.imu.clear();
+        fresh.att = None;
+        fresh.gps_imu = None;
+        fresh.vio2 = None;
+        fresh.last_speed_mps = 0.0;
+        fresh.last_fix = None;
+        fresh.last_video_t_ns = i64::MIN;
+        fresh.f_sum = (Vector3::zeros(), 0);
+        fresh.init_f.clear();
+        fresh.health = Health::default();
+        *self = fresh;
+        if let Some(o) = cfg_frame {
+            self.set_frame(o);
+        }
+    }
+
+    /// IMU sample: propagates all three filters (eqs. 29–31).
+    pub fn push_imu(&mut self, s: &ImuSample) -> Option<PoseOutput> {
+        let prev = self.imu.back().copied();
+        self.imu.push_back(*s);
+        while self
+            .imu
+            .front()
+            .is_some_and(|f| s.t_ns - f.t_ns > 2_000_000_000)
+        {
+            self.imu.pop_front();
+        }
+        self.f_sum.0 += s.accel_mps2;
+        self.f_sum.1 += 1;
+        if self.att.is_none() {
+            self.init_f.push_back(s.accel_mps2);
+            let keep = (self.params.init_level_window_s * 200.0).max(10.0) as usize;
+            while self.init_f.len() > keep {
+                self.init_f.pop_front();
+            }
+        }
+        let (Some(prev), Some(frame)) = (prev, self.frame) else {
+            return None;
+        };
+        let (Some(att), Some(gi)) = (self.att.as_mut(), self.gps_imu.as_mut()) else {
+            return None;
+        };
+        let m = mean_of(&prev, s);
+        let dt_s = (s.t_ns - prev.t_ns) as f64 * 1e-9;
+        att.predict(&m.gyro, &self.w_ie, dt_s, self.gyro_psd, s.t_ns);
+        let c = att.rotation();
+        let att_var = att.p.trace() / 3.0;
+        let g = self
+            .gravity
+            .get_or_insert_with(|| GravityCache::new(&frame, &gi.x))
+            .at(&frame, &gi.x);
+        let q_acc = self.accel_psd + m.accel.norm_squared() * att_var;
+        gi.predict(&c, &m.accel, &g, &self.w_ie, dt_s, q_acc);
+        let outage = self
+            .last_fix
+            .is_some_and(|(f, _)| s.t_ns - f.t_ns > OUTAGE_AFTER_NS);
+        if outage {
+            // VIDEO-IMU(2) starts from the GPS-IMU state at the start of the outage.
+            let v2 = self.vio2.get_or_insert_with(|| gi.clone());
+            v2.predict(&c, &m.accel, &g, &self.w_ie, dt_s, q_acc);
+        } else {
+            self.vio2 = None;
+        }
+        self.output(s.t_ns)
+    }
+
+    /// GNSS fix: GPS-IMU update (eqs. 32–33), attitude aiding without video, initialisation.
+    pub fn push_gnss(&mut self, fix: &GnssFix) {
+        let lla = Lla::from_deg(fix.lat_deg, fix.lon_deg, fix.alt_m);
+        if self.frame.is_none() {
+            self.set_frame(lla);
+        }
+        let Some(frame) = self.frame else { return };
+        let meas = GnssMeas {
+            t_ns: fix.t_ns,
+            pos_ned_m: frame.lla_to_ned(&lla),
+            vel_ned_mps: fix.vel_ned_mps,
+            sigma_h_m: fix.sigma_h_m,
+            sigma_v_m: fix.sigma_v_m,
+            sigma_vel_mps: fix.sigma_vel_mps,
+        };
+        let f_mean = if self.f_sum.1 > 0 {
+            self.f_sum.0 / self.f_sum.1 as f64
+        } else {
+            Vector3::zeros()
+        };
+        self.f_sum = (Vector3::zeros(), 0);
+        let gyro = self
+            .imu
+            .back()
+            .map(|s| s.gyro_radps)
+            .unwrap_or_else(Vector3::zeros);
+        let a_n = match self.last_fix {
+            Some((p, _)) if meas.t_ns > p.t_ns && meas.t_ns - p.t_ns < 2_000_000_000 => {
+                (meas.vel_ned_mps - p.vel_ned_mps) / ((meas.t_ns - p.t_ns) as f64 * 1e-9)
+            }
+            _ => Vector3::zeros(),
+        };
+        self.last_fix = Some((meas, a_n));
+        let g = frame.gravity_ned(&meas.pos_ned_m);
+        if self.att.is_none() {
+            self.try_init(&meas, &g, &a_n, &gyro);
+            return;
+        }
+        let video =
+            meas.t_ns - self.last_video_t_ns.max(i64::MIN + VIDEO_TIMEOUT_NS) <= VIDEO_TIMEOUT_NS;
+        if let Some(att) = self.att.as_mut() {
+            if !video && f_mean.norm() > 1.0 {
+                gnss_attitude_aiding(
+                    att,
+                    &f_mean,
+                    &(g - a_n),
+                    &meas.vel_ned_mps,
+                    self.params.init_min_speed_mps,
+                    self.params.gate_sigma,
+                    &mut self.gnss_att_diag,
+                );
+            }
+        }
+        let (Some(att), Some(gi)) = (self.att.as_ref(), self.gps_imu.as_mut()) else {
+            return;
+        };
+        let c = att.rotation();
+        let w_nb = gyro - c.transpose() * self.w_ie;
+        let gate = self.params.gate_sigma;
+        gi.update_gnss(
+            &meas,
+            &c,
+            &self.lever_b,
+            &w_nb,
+            gate,
+            self.params.gnss_reset_timeout_ns,
+            &mut self.health.gnss_pos,
+            &mut self.health.gnss_vel,
+        );
+        self.last_speed_mps = gi.v.norm();
+    }
+
+    fn try_init(
+        &mut self,
+        meas: &GnssMeas,
+        g: &Vector3<f64>,
+        a_n: &Vector3<f64>,
+        gyro: &Vector3<f64>,
+    ) {
+        if (self.init_f.len() as f64) < 0.8 * self.params.init_level_window_s * 200.0 {
+            return;
+        }
+        let f_b = self.init_f.iter().sum::<Vector3<f64>>() / self.init_f.len() as f64;
+        let moving = meas.vel_ned_mps.xy().norm() >= self.params.init_min_speed_mps;
+        let yaw = if moving {
+            meas.vel_ned_mps.y.atan2(meas.vel_ned_mps.x)
+        } else {
+            0.0
+        };
+        let Some(q) = attitude_from_gravity(&f_b, &(g - a_n), yaw) else {
+            return;
+        };
+        let (r, p, y) = q.euler_angles();
+        let yaw_sigma = if moving {
+            self.params.init_yaw_sigma_rad
+        } else {
+            crate::init::UNALIGNED_YAW_SIGMA_RAD
+        };
+        let tilt = self.params.init_tilt_sigma_rad;
+        let att = AttitudeEkf::new(
+            Vector3::new(r, p, y),
+            Vector3::new(tilt, tilt, yaw_sigma),
+            meas.t_ns,
+        );
+        let c = att.rotation();
+        let pos = meas.pos_ned_m - c * self.lever_b;
+        let vel = meas.vel_ned_mps - c * gyro.cross(&self.lever_b);
+        self.gps_imu = Some(PosVelEkf::new(
+            pos,
+            vel,
+            Vector3::new(meas.sigma_h_m, meas.sigma_h_m, meas.sigma_v_m),
+            meas.sigma_vel_mps * 2.0,
+        ));
+        self.att = Some(att);
+    }
+
+    /// Video egomotion: pseudo-attitude (eq. 34) and, during outages, eq. (35).
+    pub fn push_egomotion(&mut self, m: &Egomotion) {
+        let (Some(bfc), Some(att)) = (self.body_from_cam, self.att.as_mut()) else {
+            return;
+        };
+        self.last_video_t_ns = m.t1_ns;
+        let gate = self.params.gate_sigma;
+        att.video_update(m, &bfc, gate, &mut self.health.vision_rot);
+        let Some(v2) = self.vio2.as_mut() else { return };
+        let Some(dir) = m
+            .t_dir_cam1
+            .map(|d| d.into_inner())
+            .or(m.t_cam1_m.map(|t| t.normalize()))
+        else {
+            return;
+        };
+        let Some(c1) = att.rotation_at(m.t1_ns) else {
+            return;
+        };
+        // Camera displacement c1 − c0 = −R_nc1 t (eq. 35's Δp, a unit vector), speed = last valid.
+        let dir_n = -(c1 * bfc.rotation.to_rotation_matrix().matrix() * dir);
+        let dir_sigma = m.t_cov.trace().max(0.0).sqrt().max(1e-3);
+        v2.update_velocity(
+            &(dir_n * self.last_speed_mps),
+            (self.last_speed_mps * dir_sigma).max(0.05),
+            m.t1_ns,
+            gate,
+            &mut self.health.vision_trans,
+        );
+    }
+
+    /// Motion prior from the gyro samples and the attitude filter.
+    pub fn motion_prior(&self, t0_ns: i64, t1_ns: i64, terrain_elevation_m: f64) -> MotionPrior {
+        let (Some(bfc), Some(att), Some(gi), Some(frame)) = (
+            self.body_from_cam,
+            self.att.as_ref(),
+            self.gps_imu.as_ref(),
+            self.frame.as_ref(),
+        ) else {
+            return MotionPrior::default();
+        };
+        let pv = self.vio2.as_ref().unwrap_or(gi);
+        let now = crate::motion_prior::NowState {
+            t_ns: att.t_ns,
+            q: att.quaternion(),
+            p: pv.x,
+            v: pv.v,
+            bg: Vector3::zeros(),
+        };
+        crate::motion_prior::prior(
+            &self.imu,
+            &bfc,
+            frame,
+            &now,
+            t0_ns,
+            t1_ns,
+            terrain_elevation_m,
+            self.gyro_psd.sqrt(),
+            0.0,
+        )
+    }
+
+    /// Health (mode from the filters' activity).
+    pub fn health(&self) -> Health {
+        let mut h = self.health;
+        let t = self.imu.back().map(|s| s.t_ns).unwrap_or(0);
+        let to = self.params.aid_timeout_ns;
+        h.mode = match (&self.att, &self.gps_imu) {
+            (Some(_), Some(gi)) if !gi.x.iter().all(|v| v.is_finite()) => Mode::Diverged,
+            (Some(_), Some(_)) if h.gnss_pos.active(t, to) => Mode::Nominal,
+            (Some(_), Some(_)) if self.vio2.is_some() && h.vision_trans.active(t, to) => {
+                Mode::GnssDeniedVision
+            }
+            (Some(_), Some(_)) => Mode::InertialOnly,
+            _ => Mode::Initialising,
+        };
+        if let (Some(att), Some(gi)) = (&self.att, &self.gps_imu) {
+            let pv = self.vio2.as_ref().unwrap_or(gi);
+            for k in 0..6 {
+                h.cov_diag[k] = pv.p[(k, k)];
+            }
+            for k in 0..3 {
+                h.cov_diag[6 + k] = att.p[(k, k)];
+            }
+        }
+        h
+    }
+
+    fn output(&self, t_ns: i64) -> Option<PoseOutput> {
+        let (Some(att), Some(gi), Some(frame)) = (
+            self.att.as_ref(),
+            self.gps_imu.as_ref(),
+            self.frame.as_ref(),
+        ) else {
+            return None;
+        };
+        let pv = self.vio2.as_ref().unwrap_or(gi);
+        let h = self.health();
+        let to = self.params.aid_timeout_ns;
+        let sd = |m: &Matrix3<f64>| m.diagonal().map(|v| v.max(0.0).sqrt());
+        Some(PoseOutput {
+            t_ns,
+            lla: frame.ned_to_lla(&pv.x),
+            pos_ned_m: pv.x,
+            vel_ned_mps: pv.v,
+            nav_from_body: att.quaternion(),
+            euler_rad: att.euler,
+            sigma_pos_ned_m: sd(&pv.p.fixed_view::<3, 3>(0, 0).into_owned()),
+            sigma_vel_mps: sd(&pv.p.fixed_view::<3, 3>(3, 3).into_owned()),
+            sigma_att_rad: sd(&att.p),
+            gyro_bias_radps: Vector3::zeros(),
+            accel_bias_mps2: Vector3::zeros(),
+            health: h,
+            aiding: AidingFlags {
+                gnss_pos: h.gnss_pos.active(t_ns, to),
+                gnss_vel: h.gnss_vel.active(t_ns, to),
+                vision_rot: h.vision_rot.active(t_ns, to),
+                vision_trans: h.vision_trans.active(t_ns, to),
+            },
+        })
+    }
+}
+
+/// GNSS-derived attitude pseudo-measurement for the no-video case (see the module doc).
+fn gnss_attitude_aiding(
+    att: &mut AttitudeEkf,
+    f_b: &Vector3<f64>,
+    g_app_n: &Vector3<f64>,
+    vel_n: &Vector3<f64>,
+    min_speed: f64,
+    gate: f64,
+    diag: &mut crate::aid_sources::InnovDiag,
+) {
+    let moving = vel_n.xy().norm() >= min_speed;
+    let yaw = if moving {
+        vel_n.y.atan2(vel_n.x)
+    } else {
+        att.euler.z
+    };
+    let Some(q) = attitude_from_gravity(f_b, g_app_n, yaw) else {
+        return;
+    };
+    let (r, p, y) = q.euler_angles();
+    let course_sigma = if moving { GNSS_COURSE_SIGMA_RAD } else { 1e3 };
+    let sig = Vector3::new(GNSS_TILT_SIGMA_RAD, GNSS_TILT_SIGMA_RAD, course_sigma);
+    att.update_euler(&Vector3::new(r, p, y), &sig, gate, att.t_ns, diag);
+}

@@ -1,0 +1,85 @@
+//! Tuning parameters of both profiles, with documented defaults.
+
+/// Parameters of the estimator (both profiles). Sensor noise comes from the [`VehicleConfig`]
+/// (`uavnav_core::VehicleConfig`); these are the filter's own choices.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EstimatorParams {
+    /// How far the fusion horizon trails the newest IMU sample, ns. Must exceed the camera latency
+    /// plus one frame interval for vision to be fused at its own time (PX4 EKF2 `delay_max`).
+    pub fusion_delay_ns: i64,
+    /// Covariance prediction period, s: the nominal state is integrated at every IMU sample, the
+    /// covariance over accumulated intervals of about this length (PX4 `FILTER_UPDATE_PERIOD`).
+    pub cov_period_s: f64,
+    /// Largest accepted gap between consecutive IMU samples, ns; larger gaps are rejected.
+    pub max_imu_gap_ns: i64,
+    /// Largest accepted |specific force|, m/s² (absurd-value check).
+    pub max_accel_mps2: f64,
+    /// Largest accepted |angular rate|, rad/s.
+    pub max_gyro_radps: f64,
+    /// Measurements older than this behind the newest IMU sample are refused, ns.
+    pub max_measurement_age_ns: i64,
+    /// Accelerometer averaging window for levelling at initialisation, s.
+    pub init_level_window_s: f64,
+    /// Ground speed above which the GNSS course gives the initial heading, m/s.
+    pub init_min_speed_mps: f64,
+    /// Initial 1-σ heading uncertainty when aligned from the GNSS course (sideslip, crab), rad.
+    pub init_yaw_sigma_rad: f64,
+    /// Initial 1-σ roll/pitch uncertainty, rad.
+    pub init_tilt_sigma_rad: f64,
+    /// Initial 1-σ gyro bias, rad/s.
+    pub init_gyro_bias_sigma_radps: f64,
+    /// Initial 1-σ accelerometer bias, m/s².
+    pub init_accel_bias_sigma_mps2: f64,
+    /// Correlation time of the GNSS position error (first-order Gauss–Markov), s.
+    pub gnss_pos_tau_s: f64,
+    /// Fraction of the reported GNSS position variance that is time-correlated (the Gauss–Markov
+    /// state); the rest is treated as white measurement noise.
+    pub gnss_pos_correlated_fraction: f64,
+    /// Floor on the white GNSS position noise, m.
+    pub gnss_pos_white_min_m: f64,
+    /// Innovation gate as a normal quantile (σ): the chi-square gate is χ²(dof) at the
+    /// probability of this quantile (Wilson–Hilferty), test ratio = NIS / gate. 3.29 ≈ 0.9995.
+    pub gate_sigma: f64,
+    /// GNSS rejected continuously for this long triggers an inflate-and-fuse reset, ns.
+    pub gnss_reset_timeout_ns: i64,
+    /// A source counts as active if fused within this time, ns.
+    pub aid_timeout_ns: i64,
+    /// Scale applied to the vision covariances (robustness margin over the solver's first-order
+    /// covariance).
+    pub vision_cov_scale: f64,
+    /// Use vision relative rotation.
+    pub use_vision_rotation: bool,
+    /// Use vision translation (direction or metric).
+    pub use_vision_translation: bool,
+    /// Position σ above which the filter is declared diverged, m.
+    pub diverged_pos_sigma_m: f64,
+}
+
+impl Default for EstimatorParams {
+    fn default() -> Self {
+        Self {
+            fusion_delay_ns: 200_000_000,
+            cov_period_s: 0.01,
+            max_imu_gap_ns: 500_000_000,
+            max_accel_mps2: 16.0 * 9.81,
+            max_gyro_radps: 35.0,
+            max_measurement_age_ns: 2_000_000_000,
+            init_level_window_s: 0.5,
+            init_min_speed_mps: 3.0,
+            init_yaw_sigma_rad: 10f64.to_radians(),
+            init_tilt_sigma_rad: 2f64.to_radians(),
+            init_gyro_bias_sigma_radps: 1e-3,
+            init_accel_bias_sigma_mps2: 0.05,
+            gnss_pos_tau_s: 300.0,
+            gnss_pos_correlated_fraction: 0.9,
+            gnss_pos_white_min_m: 0.05,
+            gate_sigma: 3.29,
+            gnss_reset_timeout_ns: 5_000_000_000,
+            aid_timeout_ns: 2_000_000_000,
+            vision_cov_scale: 1.0,
+            use_vision_rotation: true,
+            use_vision_translation: true,
+            diverged_pos_sigma_m: 5_000.0,
+        }
+    }
+}
