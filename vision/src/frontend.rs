@@ -1,0 +1,567 @@
+//! The per-frame pipeline: decode → pyramid → frame checks → IMU-aided KLT with a
+//! forward–backward check → egomotion → feature replenishment.
+
+use nalgebra::{Isometry3, Matrix3, Point2, Unit, UnitQuaternion, Vector2, Vector3};
+use thiserror::Error;
+use uavnav_core::rng::Rng;
+use uavnav_core::{CameraModel, Egomotion, ImageFormat, MotionPrior};
+
+use crate::decode::{DecodeError, LumaDecoder};
+use crate::essential::to_quat;
+use crate::klt::{KltParams, KltScratch, best_corner_in, track_point};
+use crate::pyramid::{Pyramid, frame_stats};
+use crate::solve::{SolveParams, SolveScratch, solve};
+
+/// Why a frame pair gave no egomotion.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum NoMeasurement {
+    /// First frame, or the previous frame was rejected: nothing to pair with.
+    #[error("no reference frame (first frame or previous frame rejected)")]
+    NoReference,
+    /// The frame could not be decoded (corrupt or truncated).
+    #[error("decode error: {0}")]
+    Decode(String),
+    /// The frame size differs from the configured camera.
+    #[error("frame is {got_w}x{got_h}, camera expects {want_w}x{want_h}")]
+    SizeMismatch {
+        /// Decoded width.
+        got_w: u32,
+        /// Decoded height.
+        got_h: u32,
+        /// Expected width.
+        want_w: u32,
+        /// Expected height.
+        want_h: u32,
+    },
+    /// Frame (nearly) black.
+    #[error("black frame (mean {mean:.1})")]
+    Black {
+        /// Mean intensity.
+        mean: f32,
+    },
+    /// Frame (nearly) saturated.
+    #[error("saturated frame (mean {mean:.1}, {fraction:.2} of pixels saturated)")]
+    Saturated {
+        /// Mean intensity.
+        mean: f32,
+        /// Saturated fraction.
+        fraction: f32,
+    },
+    /// No contrast.
+    #[error("textureless frame (std {std:.2})")]
+    Textureless {
+        /// Intensity standard deviation.
+        std: f32,
+    },
+    /// Fine detail missing (motion or focus blur).
+    #[error("blurred frame (sharpness {sharpness:.2})")]
+    Blurred {
+        /// Sharpness figure, see [`crate::pyramid::FrameStats::sharpness`].
+        sharpness: f32,
+    },
+    /// Too few features tracked into the new frame.
+    #[error("too few tracks ({tracked} < {needed})")]
+    TooFewTracks {
+        /// Tracked features.
+        tracked: u32,
+        /// Needed.
+        needed: u32,
+    },
+    /// Too few inliers for a trustworthy solution.
+    #[error("too few inliers ({inliers})")]
+    TooFewInliers {
+        /// Inliers found.
+        inliers: u32,
+    },
+    /// The plane method was requested but the prior has no ground normal/distance.
+    #[error("plane method requested without a ground prior")]
+    NoGroundPrior,
+    /// The geometry is not determined.
+    #[error("degenerate geometry: {0}")]
+    Degenerate(&'static str),
+}
+
+impl NoMeasurement {
+    /// Short machine-readable tag (CSV `reason` column).
+    pub fn tag(&self) -> &'static str {
+        match self {
+            NoMeasurement::NoReference => "no_reference",
+            NoMeasurement::Decode(_) => "decode_error",
+            NoMeasurement::SizeMismatch { .. } => "size_mismatch",
+            NoMeasurement::Black { .. } => "black",
+            NoMeasurement::Saturated { .. } => "saturated",
+            NoMeasurement::Textureless { .. } => "textureless",
+            NoMeasurement::Blurred { .. } => "blurred",
+            NoMeasurement::TooFewTracks { .. } => "too_few_tracks",
+            NoMeasurement::TooFewInliers { .. } => "too_few_inliers",
+            NoMeasurement::NoGroundPrior => "no_ground_prior",
+            NoMeasurement::Degenerate(_) => "degenerate",
+        }
+    }
+}
+
+/// Front-end settings. Defaults target 640×480 at 20–30 Hz.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VisionParams {
+    /// Target number of features (one per grid cell). Default 250.
+    pub max_features: usize,
+    /// Pyramid levels built and used without a prior. Default 3.
+    pub pyramid_levels: usize,
+    /// Levels used when the IMU prior predicts the flow (paper IV-A). Default 2.
+    pub aided_levels: usize,
+    /// Use the prior to predict feature positions (IMU aid). Default true.
+    pub imu_aid: bool,
+    /// Lucas–Kanade settings.
+    pub klt: KltParams,
+    /// Forward–backward consistency threshold, px. Default 0.5.
+    pub fb_threshold_px: f32,
+    /// Minimum Shi–Tomasi score for a new corner. Default 20.
+    pub min_corner_score: f32,
+    /// Candidate stride when searching a grid cell, px. Default 2.
+    pub corner_step: usize,
+    /// Minimum tracks for solving. Default 20.
+    pub min_tracks: usize,
+    /// Mean intensity below which a frame is black. Default 12.
+    pub black_mean: f32,
+    /// Saturated-pixel fraction above which a frame is saturated. Default 0.8.
+    pub saturated_fraction: f32,
+    /// Intensity std below which a frame is textureless. Default 4.
+    pub textureless_std: f32,
+    /// Sharpness below which a frame is blurred. Default 0.55.
+    pub blur_sharpness: f32,
+    /// Egomotion solver settings.
+    pub solve: SolveParams,
+    /// Seed of the RANSAC generator (results are deterministic given the inputs).
+    pub seed: u64,
+}
+
+impl Default for VisionParams {
+    fn default() -> Self {
+        Self {
+            max_features: 250,
+            pyramid_levels: 3,
+            aided_levels: 2,
+            imu_aid: true,
+            klt: KltParams::default(),
+            fb_threshold_px: 0.5,
+            min_corner_score: 20.0,
+            corner_step: 2,
+            min_tracks: 20,
+            black_mean: 12.0,
+            saturated_fraction: 0.8,
+            textureless_std: 4.0,
+            blur_sharpness: 0.55,
+            solve: SolveParams::default(),
+            seed: 0x5EED_0F_u64,
+        }
+    }
+}
+
+/// Per-stage wall times, µs (0 unless a clock was set with [`FrontEnd::set_clock`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StageTimings {
+    /// Decode.
+    pub decode_us: u64,
+    /// Pyramid, checks, tracking and feature replenishment.
+    pub track_us: u64,
+    /// Egomotion solver.
+    pub solve_us: u64,
+}
+
+/// Output for one incoming frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameResult {
+    /// Time of the reference frame paired with this one, when there was one.
+    pub t0_ns: Option<i64>,
+    /// Time of this frame.
+    pub t1_ns: i64,
+    /// The measurement, or why there is none.
+    pub outcome: Result<Egomotion, NoMeasurement>,
+    /// Stage timings (never used for results).
+    pub timings: StageTimings,
+    /// Features tracked from the reference into this frame.
+    pub tracked: u32,
+}
+
+/// A monotonic microsecond clock injected by the caller (the library never reads the clock).
+pub type Clock = Box<dyn FnMut() -> u64 + Send>;
+
+/// The vision front end for one camera. Feed frames in time order with [`FrontEnd::process`].
+pub struct FrontEnd {
+    camera: CameraModel,
+    body_from_cam: Isometry3<f64>,
+    params: VisionParams,
+    decoder: LumaDecoder,
+    prev: Pyramid,
+    cur: Pyramid,
+    prev_t_ns: Option<i64>,
+    /// Feature pixels in the reference frame and their normalized rays.
+    pts: Vec<[f32; 2]>,
+    rays: Vec<Vector3<f64>>,
+    // per-frame scratch
+    m_x0: Vec<Vector3<f64>>,
+    m_x1: Vec<Vector3<f64>>,
+    m_px1: Vec<[f32; 2]>,
+    cells: Vec<bool>,
+    klt: KltScratch,
+    solve_scratch: SolveScratch,
+    rng: Rng,
+    clock: Clock,
+}
+
+impl std::fmt::Debug for FrontEnd {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FrontEnd")
+            .field("camera", &self.camera)
+            .field("params", &self.params)
+            .field("features", &self.pts.len())
+            .field("prev_t_ns", &self.prev_t_ns)
+            .finish_non_exhaustive()
+    }
+}
+
+impl FrontEnd {
+    /// A front end for `camera` mounted at `body_from_cam`.
+    pub fn new(camera: &CameraModel, body_from_cam: Isometry3<f64>, params: VisionParams) -> Self {
+        let cap = params.max_features * 2;
+        Self {
+            camera: *camera,
+            body_from_cam,
+            params,
+            decoder: LumaDecoder::new(camera.width, camera.height),
+            prev: Pyramid::default(),
+            cur: Pyramid::default(),
+            prev_t_ns: None,
+            pts: Vec::with_capacity(cap),
+            rays: Vec::with_capacity(cap),
+            m_x0: Vec::with_capacity(cap),
+            m_x1: Vec::with_capacity(cap),
+            m_px1: Vec::with_capacity(cap),
+            cells: Vec::new(),
+            klt: KltScratch::default(),
+            solve_scratch: SolveScratch::default(),
+            rng: Rng::derive(params.seed, "vision-ransac"),
+            clock: Box::new(|| 0),
+        }
+    }
+
+    /// Sets the clock used for [`StageTimings`] (e.g. µs since an `Instant`).
+    pub fn set_clock(&mut self, clock: Clock) {
+        self.clock = clock;
+    }
+
+    /// The parameters in use.
+    pub fn params(&self) -> &VisionParams {
+        &self.params
+    }
+
+    /// Time of the current reference frame: the prior passed to the next
+    /// [`process`](Self::process) must describe the motion from this time.
+    pub fn reference_t_ns(&self) -> Option<i64> {
+        self.prev_t_ns
+    }
+
+    /// Converts a body rotation `body1_from_body0` (e.g. integrated gyro) into the camera
+    /// rotation `cam1_from_cam0` through the mounting.
+    pub fn cam_rotation_from_body(
+        &self,
+        body1_from_body0: &UnitQuaternion<f64>,
+    ) -> UnitQuaternion<f64> {
+        let bc = self.body_from_cam.rotation;
+        bc.inverse() * body1_from_body0 * bc
+    }
+
+    /// Forgets the reference frame and all tracks.
+    pub fn reset(&mut self) {
+        self.prev_t_ns = None;
+        self.pts.clear();
+        self.rays.clear();
+    }
+
+    /// Processes one frame taken at `t_ns`; `prior` describes the motion from
+    /// [`reference_t_ns`](Self::reference_t_ns) to `t_ns`. Deterministic given the inputs.
+    /// A rejected frame (decode error, black, …) also drops the reference.
+    pub fn process(
+        &mut self,
+        t_ns: i64,
+        format: ImageFormat,
+        data: &[u8],
+        prior: &MotionPrior,
+    ) -> FrameResult {
+        let t_start = (self.clock)();
+        let t0_ns = self.prev_t_ns;
+        let mut res = FrameResult {
+            t0_ns,
+            t1_ns: t_ns,
+            outcome: Err(NoMeasurement::NoReference),
+            timings: StageTimings::default(),
+            tracked: 0,
+        };
+        let decoded = self.decoder.decode(format, data).map(|_| ());
+        let t_decoded = (self.clock)();
+        res.timings.decode_us = t_decoded.saturating_sub(t_start);
+        if let Err(e) = decoded {
+            self.reset();
+            res.outcome = Err(match e {
+                DecodeError::SizeMismatch {
+                    got_w,
+                    got_h,
+                    want_w,
+                    want_h,
+                } => NoMeasurement::SizeMismatch {
+                    got_w,
+                    got_h,
+                    want_w,
+                    want_h,
+                },
+                other => NoMeasurement::Decode(other.to_string()),
+            });
+            return res;
+        }
+        let (w, h) = (self.camera.width as usize, self.camera.height as usize);
+        // borrow split: decode buffer is read while cur is written
+        let luma = self.decoder.decode_buffer();
+        self.cur
+            .build(luma, w, h, self.params.pyramid_levels.max(2));
+        if let Some(reject) = self.check_frame() {
+            self.reset();
+            res.outcome = Err(reject);
+            res.timings.track_us = (self.clock)().saturating_sub(t_decoded);
+            return res;
+        }
+        if t0_ns.is_none() {
+            self.replenish();
+            self.finish_frame(t_ns);
+            res.timings.track_us = (self.clock)().saturating_sub(t_decoded);
+            return res;
+        }
+        self.track(prior);
+        res.tracked = self.m_x0.len() as u32;
+        let t_tracked = (self.clock)();
+        res.outcome = if self.m_x0.len() < self.params.min_tracks {
+            Err(NoMeasurement::TooFewTracks {
+                tracked: res.tracked,
+                needed: self.params.min_tracks as u32,
+            })
+        } else {
+            let f = 0.5 * (self.camera.fx + self.camera.fy);
+            solve(
+                &self.m_x0,
+                &self.m_x1,
+                prior,
+                f,
+                &self.params.solve,
+                &mut self.rng,
+                &mut self.solve_scratch,
+            )
+            .map(|s| Egomotion {
+                t0_ns: t0_ns.unwrap_or(t_ns),
+                t1_ns: t_ns,
+                cam1_from_cam0: to_quat(&s.r),
+                t_dir_cam1: s.t_dir.map(Unit::new_normalize),
+                t_cam1_m: s.t_m,
+                rot_cov: s.cov.fixed_view::<3, 3>(0, 0).into_owned(),
+                t_cov: s.cov.fixed_view::<3, 3>(3, 3).into_owned(),
+                joint_cov: s.cov,
+                tracked: res.tracked,
+                inliers: s.inliers as u32,
+                quality: s.quality,
+                solver: s.solver,
+            })
+        };
+        let t_solved = (self.clock)();
+        res.timings.solve_us = t_solved.saturating_sub(t_tracked);
+        self.keep_tracks(res.outcome.is_ok());
+        self.replenish();
+        self.finish_frame(t_ns);
+        res.timings.track_us =
+            (self.clock)().saturating_sub(t_solved) + t_tracked.saturating_sub(t_decoded);
+        res
+    }
+
+    fn check_frame(&self) -> Option<NoMeasurement> {
+        let st = frame_stats(&self.cur);
+        let p = &self.params;
+        if st.mean < p.black_mean {
+            Some(NoMeasurement::Black { mean: st.mean })
+        } else if st.saturated_fraction > p.saturated_fraction {
+            Some(NoMeasurement::Saturated {
+                mean: st.mean,
+                fraction: st.saturated_fraction,
+            })
+        } else if st.std < p.textureless_std {
+            Some(NoMeasurement::Textureless { std: st.std })
+        } else if st.sharpness < p.blur_sharpness {
+            Some(NoMeasurement::Blurred {
+                sharpness: st.sharpness,
+            })
+        } else {
+            None
+        }
+    }
+
+    /// Predicted pixel of a feature in the new frame (paper IV-A): the prior rotation and, when
+    /// known, the terrain plane and the predicted translation (`x1 ∝ R x0 + t · nᵀx0 / d`).
+    fn predict(
+        &self,
+        px: [f32; 2],
+        ray: &Vector3<f64>,
+        r: &Matrix3<f64>,
+        prior: &MotionPrior,
+    ) -> [f32; 2] {
+        let mut p = r * ray;
+        if let (Some(t), Some(n), Some(d)) = (
+            prior.t_cam1_m,
+            prior.ground_normal_cam0,
+            prior.ground_distance_m,
+        ) {
+            let c = n.dot(ray);
+            if c > 1e-6 && d > 0.0 {
+                p += t * (c / d);
+            }
+        }
+        if p.z <= 1e-6 {
+            return px;
+        }
+        let q = self
+            .camera
+            .normalized_to_pixel(&Vector2::new(p.x / p.z, p.y / p.z));
+        if q.x.is_finite() && q.y.is_finite() {
+            [q.x as f32, q.y as f32]
+        } else {
+            px
+        }
+    }
+
+    fn track(&mut self, prior: &MotionPrior) {
+        self.m_x0.clear();
+        self.m_x1.clear();
+        self.m_px1.clear();
+        let aid = self.params.imu_aid && prior.cam1_from_cam0.is_some();
+        let r = prior
+            .cam1_from_cam0
+            .map(|q| *q.to_rotation_matrix().matrix())
+            .unwrap_or_else(Matrix3::identity);
+        let levels = if aid {
+            self.params.aided_levels
+        } else {
+            self.params.pyramid_levels
+        };
+        let top = levels.max(1) - 1;
+        let fb2 = self.params.fb_threshold_px * self.params.fb_threshold_px;
+        for i in 0..self.pts.len() {
+            let p0 = self.pts[i];
+            let guess = if aid {
+                self.predict(p0, &self.rays[i], &r, prior)
+            } else {
+                p0
+            };
+            let Some(p1) = track_point(
+                &self.prev,
+                &self.cur,
+                p0,
+                guess,
+                top,
+                &self.params.klt,
+                &mut self.klt,
+            ) else {
+                continue;
+            };
+            // backward: start from the inverse prediction (p0 shifted by the forward correction)
+            let bg = [p1[0] - (guess[0] - p0[0]), p1[1] - (guess[1] - p0[1])];
+            let Some(pb) = track_point(
+                &self.cur,
+                &self.prev,
+                p1,
+                bg,
+                top,
+                &self.params.klt,
+                &mut self.klt,
+            ) else {
+                continue;
+            };
+            let (dx, dy) = (pb[0] - p0[0], pb[1] - p0[1]);
+            if dx * dx + dy * dy > fb2 {
+                continue;
+            }
+            let n1 = self
+                .camera
+                .pixel_to_normalized(&Point2::new(f64::from(p1[0]), f64::from(p1[1])));
+            self.m_x0.push(self.rays[i]);
+            self.m_x1.push(Vector3::new(n1.x, n1.y, 1.0));
+            self.m_px1.push(p1);
+        }
+    }
+
+    /// Keeps the tracked features (only the solver's inliers when it succeeded) as the new
+    /// reference features.
+    fn keep_tracks(&mut self, solved: bool) {
+        self.pts.clear();
+        self.rays.clear();
+        if solved {
+            for &i in &self.solve_scratch.inliers {
+                self.pts.push(self.m_px1[i]);
+                self.rays.push(self.m_x1[i]);
+            }
+        } else {
+            self.pts.extend_from_slice(&self.m_px1);
+            self.rays.extend_from_slice(&self.m_x1);
+        }
+    }
+
+    /// Grid geometry: square cells so that the grid holds about `max_features` cells.
+    fn grid(&self) -> (usize, usize, usize) {
+        let (w, h) = (self.camera.width as usize, self.camera.height as usize);
+        let cell = (((w * h) as f64 / self.params.max_features.max(1) as f64)
+            .sqrt()
+            .floor() as usize)
+            .max(8);
+        (cell, w.div_ceil(cell), h.div_ceil(cell))
+    }
+
+    /// One feature per grid cell: drops duplicates and detects new corners in empty cells.
+    fn replenish(&mut self) {
+        let (cell, gw, gh) = self.grid();
+        self.cells.clear();
+        self.cells.resize(gw * gh, false);
+        let mut k = 0;
+        for i in 0..self.pts.len() {
+            let [x, y] = self.pts[i];
+            let c = (y as usize / cell).min(gh - 1) * gw + (x as usize / cell).min(gw - 1);
+            if !self.cells[c] {
+                self.cells[c] = true;
+                self.pts[k] = self.pts[i];
+                self.rays[k] = self.rays[i];
+                k += 1;
+            }
+        }
+        self.pts.truncate(k);
+        self.rays.truncate(k);
+        let img = &self.cur.levels[0];
+        for cy in 0..gh {
+            for cx in 0..gw {
+                if self.cells[cy * gw + cx] {
+                    continue;
+                }
+                let rect = (cx * cell, (cx + 1) * cell, cy * cell, (cy + 1) * cell);
+                if let Some((p, _)) = best_corner_in(
+                    img,
+                    rect,
+                    self.params.corner_step,
+                    self.params.min_corner_score,
+                ) {
+                    let n = self
+                        .camera
+                        .pixel_to_normalized(&Point2::new(f64::from(p[0]), f64::from(p[1])));
+                    self.pts.push(p);
+                    self.rays.push(Vector3::new(n.x, n.y, 1.0));
+                }
+            }
+        }
+    }
+
+    fn finish_frame(&mut self, t_ns: i64) {
+        std::mem::swap(&mut self.prev, &mut self.cur);
+        self.prev_t_ns = Some(t_ns);
+    }
+}

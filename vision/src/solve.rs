@@ -1,0 +1,359 @@
+//! Egomotion from normalized correspondences: the per-frame solver choice.
+//!
+//! Rule (documented in [`Method`]):
+//! 1. fit a pure rotation robustly; if the median residual parallax after it is below
+//!    `static_parallax_px`, the camera did not translate measurably → `RotationOnly`,
+//!    `t_dir_cam1 = None`;
+//! 2. `Plane` when asked, or under `Auto` when the prior has a ground normal and distance and the
+//!    plane model explains at least `plane_min_inlier_fraction` of the tracks;
+//! 3. otherwise the paper's `Essential` solver (8-point in RANSAC+LO, Huang–Faugeras,
+//!    cheirality, covariance of IV-D, then a Sampson Gauss–Newton polish).
+
+use std::fmt;
+use std::str::FromStr;
+
+use nalgebra::{Matrix3, Matrix6, Vector3};
+use uavnav_core::rng::Rng;
+use uavnav_core::{EgomotionSolver, MotionPrior};
+
+use crate::NoMeasurement;
+use crate::essential::{
+    best_factorization, covariance_h, eight_point, propagate_to_motion, refine_sampson,
+};
+use crate::plane::{GroundPlane, refine_plane, transfer_err_sq};
+use crate::robust::{
+    RansacParams, ransac_essential, ransac_plane, ransac_rotation, rotation_err_sq,
+};
+
+/// Which solver to use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Method {
+    /// Always the paper's essential-matrix solver.
+    Essential,
+    /// Always the plane-aware solver (needs a ground prior, else no measurement).
+    Plane,
+    /// Plane when a ground prior exists and the plane explains the tracks, else essential.
+    #[default]
+    Auto,
+}
+
+impl FromStr for Method {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.to_ascii_lowercase().as_str() {
+            "essential" => Ok(Method::Essential),
+            "plane" => Ok(Method::Plane),
+            "auto" => Ok(Method::Auto),
+            other => Err(format!(
+                "unknown method {other:?} (expected essential, plane or auto)"
+            )),
+        }
+    }
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Method::Essential => "essential",
+            Method::Plane => "plane",
+            Method::Auto => "auto",
+        })
+    }
+}
+
+/// Solver settings (all angles/thresholds in pixels are converted with the focal length).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolveParams {
+    /// Solver choice. Default `Auto`.
+    pub method: Method,
+    /// Inlier threshold, px. Default 1.0.
+    pub ransac_threshold_px: f64,
+    /// RANSAC hypothesis cap. Default 200.
+    pub ransac_max_iterations: usize,
+    /// RANSAC confidence. Default 0.999.
+    pub ransac_confidence: f64,
+    /// Minimum inliers for a measurement. Default 15.
+    pub min_inliers: usize,
+    /// Median parallax below which the motion is reported rotation-only, px. Default 0.25.
+    pub static_parallax_px: f64,
+    /// Fraction of tracks the plane model must explain under `Auto`. Default 0.7.
+    pub plane_min_inlier_fraction: f64,
+    /// 1-σ of the prior ground normal, rad. Default 2°.
+    pub normal_sigma_rad: f64,
+    /// Gauss–Newton iterations of the final refinements. Default 5.
+    pub refine_iterations: usize,
+    /// Lower bound of the image noise used in covariances, px. Default 0.3.
+    pub pixel_sigma_px: f64,
+}
+
+impl Default for SolveParams {
+    fn default() -> Self {
+        Self {
+            method: Method::Auto,
+            ransac_threshold_px: 1.0,
+            ransac_max_iterations: 200,
+            ransac_confidence: 0.999,
+            min_inliers: 15,
+            static_parallax_px: 0.25,
+            plane_min_inlier_fraction: 0.7,
+            normal_sigma_rad: 2f64.to_radians(),
+            refine_iterations: 5,
+            pixel_sigma_px: 0.3,
+        }
+    }
+}
+
+/// A solved relative motion (times and track count are added by the caller).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Solution {
+    /// `cam1_from_cam0`.
+    pub r: Matrix3<f64>,
+    /// Unit translation direction, `None` for rotation-only.
+    pub t_dir: Option<Vector3<f64>>,
+    /// Metric translation when known.
+    pub t_m: Option<Vector3<f64>>,
+    /// Joint covariance `[δθ; δt]`.
+    pub cov: Matrix6<f64>,
+    /// Inliers.
+    pub inliers: usize,
+    /// Quality in [0, 1].
+    pub quality: f64,
+    /// Solver used.
+    pub solver: EgomotionSolver,
+}
+
+/// Reused buffers for [`solve`].
+#[derive(Debug, Default)]
+pub struct SolveScratch {
+    /// Inlier indices of the last solution.
+    pub inliers: Vec<usize>,
+    tmp: Vec<usize>,
+    errs: Vec<f64>,
+}
+
+/// Solves the egomotion for correspondences `x0[i] ↔ x1[i]` (normalized, undistorted).
+/// `focal_px` converts pixel thresholds.
+pub fn solve(
+    x0: &[Vector3<f64>],
+    x1: &[Vector3<f64>],
+    prior: &MotionPrior,
+    focal_px: f64,
+    p: &SolveParams,
+    rng: &mut Rng,
+    s: &mut SolveScratch,
+) -> Result<Solution, NoMeasurement> {
+    let n = x0.len();
+    let thr = p.ransac_threshold_px / focal_px;
+    let sigma_floor = p.pixel_sigma_px / focal_px;
+    let rp = RansacParams {
+        threshold: thr,
+        max_iterations: p.ransac_max_iterations,
+        confidence: p.ransac_confidence,
+    };
+    let r_prior = prior
+        .cam1_from_cam0
+        .map(|q| *q.to_rotation_matrix().matrix());
+    // 1. rotation-only test
+    let r_rot = ransac_rotation(x0, x1, r_prior.as_ref(), &rp, rng, &mut s.inliers);
+    s.errs.clear();
+    s.errs
+        .extend((0..n).map(|i| rotation_err_sq(&r_rot, &x0[i], &x1[i])));
+    let mid = n / 2;
+    let median_parallax = if n > 0 {
+        s.errs.select_nth_unstable_by(mid, f64::total_cmp).1.sqrt()
+    } else {
+        0.0
+    };
+    if median_parallax * focal_px < p.static_parallax_px {
+        if s.inliers.len() < p.min_inliers {
+            return Err(NoMeasurement::TooFewInliers {
+                inliers: s.inliers.len() as u32,
+            });
+        }
+        return Ok(rotation_only(&r_rot, x0, x1, &s.inliers, sigma_floor));
+    }
+    let ground = match (prior.ground_normal_cam0, prior.ground_distance_m) {
+        (Some(nrm), Some(d)) if d.is_finite() && d > 0.0 => Some(GroundPlane {
+            normal: nrm.into_inner(),
+            distance_m: d,
+        }),
+        _ => None,
+    };
+    // 2. plane
+    match (p.method, ground) {
+        (Method::Plane, None) => return Err(NoMeasurement::NoGroundPrior),
+        (Method::Plane | Method::Auto, Some(g)) => {
+            let seed = r_prior.unwrap_or(r_rot);
+            let fit = plane_solve(x0, x1, &seed, &g, p, &rp, sigma_floor, rng, s);
+            let need = if p.method == Method::Auto {
+                (p.plane_min_inlier_fraction * n as f64).ceil() as usize
+            } else {
+                0
+            };
+            match fit {
+                Some(sol) if sol.inliers >= p.min_inliers.max(need) => return Ok(sol),
+                _ if p.method == Method::Plane => {
+                    return Err(NoMeasurement::Degenerate("plane model found no consensus"));
+                }
+                _ => {}
+            }
+        }
+        _ => {}
+    }
+    // 3. essential
+    essential_solve(x0, x1, r_prior.as_ref(), p, &rp, sigma_floor, rng, s)
+}
+
+fn quality(inliers: usize, n: usize) -> f64 {
+    let ratio = inliers as f64 / n.max(1) as f64;
+    (ratio * (inliers as f64 / 100.0).min(1.0)).clamp(0.0, 1.0)
+}
+
+fn rotation_only(
+    r: &Matrix3<f64>,
+    x0: &[Vector3<f64>],
+    x1: &[Vector3<f64>],
+    idx: &[usize],
+    sigma_floor: f64,
+) -> Solution {
+    // information of δθ from bearing residuals: Σ (I − b bᵀ) / σ²
+    let mut info = Matrix3::zeros();
+    let mut sum2 = 0.0;
+    for &i in idx {
+        let b = (r * x0[i]).normalize();
+        info += Matrix3::identity() - b * b.transpose();
+        sum2 += rotation_err_sq(r, &x0[i], &x1[i]);
+    }
+    let m = idx.len().max(1) as f64;
+    let sigma2 = (sum2 / (2.0 * m - 3.0).max(1.0)).max(sigma_floor * sigma_floor);
+    let rot_cov = info
+        .try_inverse()
+        .unwrap_or_else(|| Matrix3::identity() * 1e6)
+        * sigma2;
+    let mut cov = Matrix6::zeros();
+    cov.fixed_view_mut::<3, 3>(0, 0).copy_from(&rot_cov);
+    Solution {
+        r: *r,
+        t_dir: None,
+        t_m: None,
+        cov,
+        inliers: idx.len(),
+        quality: quality(idx.len(), x0.len()),
+        solver: EgomotionSolver::RotationOnly,
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn plane_solve(
+    x0: &[Vector3<f64>],
+    x1: &[Vector3<f64>],
+    seed: &Matrix3<f64>,
+    g: &GroundPlane,
+    p: &SolveParams,
+    rp: &RansacParams,
+    sigma_floor: f64,
+    rng: &mut Rng,
+    s: &mut SolveScratch,
+) -> Option<Solution> {
+    // The seed rotation may be a little off (gyro drift): a loose first threshold, then refine.
+    let loose = RansacParams {
+        threshold: rp.threshold * 3.0,
+        ..*rp
+    };
+    let t0 = ransac_plane(x0, x1, seed, g, &loose, rng, &mut s.inliers)?;
+    if s.inliers.len() < 6 {
+        return None;
+    }
+    let mut fit = refine_plane(
+        seed,
+        &t0,
+        g,
+        p.normal_sigma_rad,
+        x0,
+        x1,
+        &s.inliers,
+        p.refine_iterations,
+        sigma_floor,
+    )?;
+    for _ in 0..2 {
+        let g2 = GroundPlane {
+            normal: fit.normal,
+            distance_m: g.distance_m,
+        };
+        let thr2 = rp.threshold * rp.threshold;
+        s.inliers.clear();
+        s.inliers.extend(
+            (0..x0.len()).filter(|&i| transfer_err_sq(&fit.r, &fit.t, &g2, &x0[i], &x1[i]) < thr2),
+        );
+        if s.inliers.len() < 6 {
+            return None;
+        }
+        fit = refine_plane(
+            &fit.r,
+            &fit.t,
+            g,
+            p.normal_sigma_rad,
+            x0,
+            x1,
+            &s.inliers,
+            p.refine_iterations,
+            sigma_floor,
+        )?;
+    }
+    let tn = fit.t.norm();
+    Some(Solution {
+        r: fit.r,
+        t_dir: (tn > 1e-9).then(|| fit.t / tn),
+        t_m: Some(fit.t),
+        cov: fit.cov,
+        inliers: s.inliers.len(),
+        quality: quality(s.inliers.len(), x0.len()),
+        solver: EgomotionSolver::Plane,
+    })
+}
+
+#[allow(clippy::too_many_arguments)]
+fn essential_solve(
+    x0: &[Vector3<f64>],
+    x1: &[Vector3<f64>],
+    r_prior: Option<&Matrix3<f64>>,
+    p: &SolveParams,
+    rp: &RansacParams,
+    sigma_floor: f64,
+    rng: &mut Rng,
+    s: &mut SolveScratch,
+) -> Result<Solution, NoMeasurement> {
+    let Some(_) = ransac_essential(x0, x1, r_prior, rp, rng, &mut s.inliers, &mut s.tmp) else {
+        return Err(NoMeasurement::Degenerate("essential matrix: no consensus"));
+    };
+    if s.inliers.len() < p.min_inliers {
+        return Err(NoMeasurement::TooFewInliers {
+            inliers: s.inliers.len() as u32,
+        });
+    }
+    // The paper's estimate on all inliers (eqs. 13–17), its factorization (18–20) and covariance.
+    let ep = eight_point(x0, x1, &s.inliers).ok_or(NoMeasurement::Degenerate("8-point failed"))?;
+    let e = ep.essential();
+    let (r_lin, t_lin, votes) = best_factorization(&e, x0, x1, &s.inliers);
+    if votes * 2 < s.inliers.len() {
+        return Err(NoMeasurement::Degenerate(
+            "cheirality: no factorization has most points in front",
+        ));
+    }
+    let cov_h = covariance_h(&ep, x0, x1, &s.inliers, sigma_floor);
+    let cov = propagate_to_motion(&ep.h(), &cov_h, &r_lin, &t_lin);
+    let (r, t) = if p.refine_iterations > 0 {
+        refine_sampson(&r_lin, &t_lin, x0, x1, &s.inliers, p.refine_iterations)
+    } else {
+        (r_lin, t_lin)
+    };
+    Ok(Solution {
+        r,
+        t_dir: Some(t),
+        t_m: None,
+        cov,
+        inliers: s.inliers.len(),
+        quality: quality(s.inliers.len(), x0.len()),
+        solver: EgomotionSolver::Essential,
+    })
+}
