@@ -107,7 +107,8 @@ pub struct VisionParams {
     pub max_features: usize,
     /// Pyramid levels built and used without a prior. Default 3.
     pub pyramid_levels: usize,
-    /// Levels used when the IMU prior predicts the flow (paper IV-A). Default 2.
+    /// Levels used when the prior predicts the whole flow (rotation, terrain and translation;
+    /// paper IV-A). Default 2.
     pub aided_levels: usize,
     /// Use the prior to predict feature positions (IMU aid). Default true.
     pub imu_aid: bool,
@@ -127,8 +128,11 @@ pub struct VisionParams {
     pub saturated_fraction: f32,
     /// Intensity std below which a frame is textureless. Default 4.
     pub textureless_std: f32,
-    /// Sharpness below which a frame is blurred. Default 0.55.
+    /// Absolute sharpness floor (see [`crate::pyramid::FrameStats::sharpness`]), 1/px. Default 0.02.
     pub blur_sharpness: f32,
+    /// A frame whose sharpness falls below this fraction of the reference frame's is blurred.
+    /// Default 0.6.
+    pub blur_relative: f32,
     /// Egomotion solver settings.
     pub solve: SolveParams,
     /// Seed of the RANSAC generator (results are deterministic given the inputs).
@@ -150,7 +154,8 @@ impl Default for VisionParams {
             black_mean: 12.0,
             saturated_fraction: 0.8,
             textureless_std: 4.0,
-            blur_sharpness: 0.55,
+            blur_sharpness: 0.02,
+            blur_relative: 0.6,
             solve: SolveParams::default(),
             seed: 0x5EED_0F_u64,
         }
@@ -195,6 +200,8 @@ pub struct FrontEnd {
     prev: Pyramid,
     cur: Pyramid,
     prev_t_ns: Option<i64>,
+    prev_sharpness: f32,
+    cur_sharpness: f32,
     /// Feature pixels in the reference frame and their normalized rays.
     pts: Vec<[f32; 2]>,
     rays: Vec<Vector3<f64>>,
@@ -232,6 +239,8 @@ impl FrontEnd {
             prev: Pyramid::default(),
             cur: Pyramid::default(),
             prev_t_ns: None,
+            prev_sharpness: 0.0,
+            cur_sharpness: 0.0,
             pts: Vec::with_capacity(cap),
             rays: Vec::with_capacity(cap),
             m_x0: Vec::with_capacity(cap),
@@ -379,8 +388,16 @@ impl FrontEnd {
         res
     }
 
-    fn check_frame(&self) -> Option<NoMeasurement> {
+    fn check_frame(&mut self) -> Option<NoMeasurement> {
         let st = frame_stats(&self.cur);
+        self.cur_sharpness = st.sharpness;
+        let blur_floor = match self.prev_t_ns {
+            Some(_) => self
+                .params
+                .blur_sharpness
+                .max(self.params.blur_relative * self.prev_sharpness),
+            None => self.params.blur_sharpness,
+        };
         let p = &self.params;
         if st.mean < p.black_mean {
             Some(NoMeasurement::Black { mean: st.mean })
@@ -391,7 +408,7 @@ impl FrontEnd {
             })
         } else if st.std < p.textureless_std {
             Some(NoMeasurement::Textureless { std: st.std })
-        } else if st.sharpness < p.blur_sharpness {
+        } else if st.sharpness < blur_floor {
             Some(NoMeasurement::Blurred {
                 sharpness: st.sharpness,
             })
@@ -442,7 +459,13 @@ impl FrontEnd {
             .cam1_from_cam0
             .map(|q| *q.to_rotation_matrix().matrix())
             .unwrap_or_else(Matrix3::identity);
-        let levels = if aid {
+        // The full prediction (rotation + terrain + translation) leaves a small residual flow, so
+        // fewer levels suffice (paper IV-A); a rotation-only prediction leaves the parallax of
+        // the unknown translation, so the full pyramid is kept.
+        let full_prediction = prior.t_cam1_m.is_some()
+            && prior.ground_normal_cam0.is_some()
+            && prior.ground_distance_m.is_some();
+        let levels = if aid && full_prediction {
             self.params.aided_levels
         } else {
             self.params.pyramid_levels
@@ -563,5 +586,6 @@ impl FrontEnd {
     fn finish_frame(&mut self, t_ns: i64) {
         std::mem::swap(&mut self.prev, &mut self.cur);
         self.prev_t_ns = Some(t_ns);
+        self.prev_sharpness = self.cur_sharpness;
     }
 }

@@ -108,13 +108,13 @@ pub struct FrameStats {
     pub std: f32,
     /// Fraction of pixels at ≥ 250.
     pub saturated_fraction: f32,
-    /// Mean absolute forward difference at level 0 divided by the same at level 1: ≈1 for sharp
-    /// images (detail at pixel scale), → 0.5 when blurred over several pixels.
+    /// Mean |∂x| + |∂y| at level 0 divided by the intensity std, 1/px: the inverse of the
+    /// typical scale of the image structure. Blur lowers it; compared with the previous frame's
+    /// value it detects motion or focus blur whatever the scene's own texture scale.
     pub sharpness: f32,
 }
 
-/// Computes [`FrameStats`] on a pyramid with at least two levels (sub-sampled rows: only
-/// coarse figures are needed).
+/// Computes [`FrameStats`] (sub-sampled rows: only coarse figures are needed).
 pub fn frame_stats(p: &Pyramid) -> FrameStats {
     let l0 = &p.levels[0];
     let (mut n, mut s, mut s2, mut sat) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
@@ -129,13 +129,7 @@ pub fn frame_stats(p: &Pyramid) -> FrameStats {
     let mean = s / n.max(1.0);
     let std = (s2 / n.max(1.0) - mean * mean).max(0.0).sqrt();
     let g0 = mean_abs_diff(l0, 2);
-    let sharpness = match p.levels.get(1) {
-        Some(l1) => {
-            let g1 = mean_abs_diff(l1, 1);
-            if g1 > 1e-3 { g0 / g1 } else { 1.0 }
-        }
-        None => 1.0,
-    };
+    let sharpness = if std > 1e-3 { g0 / std as f32 } else { 0.0 };
     FrameStats {
         mean: mean as f32,
         std: std as f32,

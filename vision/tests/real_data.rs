@@ -1,0 +1,304 @@
+//! Real images from `../shared/data` (skipped with a message when absent): KITTI 0→5 and 0→4
+//! against the OXTS poses, the static EuRoC frames, and the EuRoC `lcd_pairs` 2→3 with a gyro
+//! prior.
+
+use std::path::PathBuf;
+
+use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use uavnav_core::{CameraModel, Distortion, EgomotionSolver, ImageFormat, ImuSample, MotionPrior};
+use uavnav_vision::prior::gyro_rotation;
+use uavnav_vision::{FrontEnd, VisionParams, pair_error};
+
+fn data_dir(sub: &str) -> Option<PathBuf> {
+    let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")).join(sub);
+    if p.exists() {
+        Some(p)
+    } else {
+        eprintln!("skipping: {} not found", p.display());
+        None
+    }
+}
+
+fn numbers(line: &str) -> Vec<f64> {
+    line.split(|c: char| c.is_whitespace() || c == ',')
+        .filter_map(|s| s.parse().ok())
+        .collect()
+}
+
+fn calib_row(text: &str, key: &str) -> Vec<f64> {
+    let line = text
+        .lines()
+        .find(|l| l.starts_with(&format!("{key}:")))
+        .unwrap();
+    numbers(&line[key.len() + 1..])
+}
+
+fn iso(r: &[f64], t: &[f64]) -> Isometry3<f64> {
+    let m = Matrix3::from_row_slice(&r[..9]);
+    let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix(&m));
+    Isometry3::from_parts(Translation3::new(t[0], t[1], t[2]), q)
+}
+
+/// OXTS pose (KITTI devkit: Mercator with the scale of frame 0, `R = Rz(yaw) Ry(pitch) Rx(roll)`).
+fn oxts_pose(v: &[f64], scale: f64) -> Isometry3<f64> {
+    let er = 6_378_137.0;
+    let (lat, lon, alt) = (v[0], v[1], v[2]);
+    let mx = scale * lon.to_radians() * er;
+    let my = scale * er * ((90.0 + lat).to_radians() / 2.0).tan().ln();
+    let q = UnitQuaternion::from_euler_angles(v[3], v[4], v[5]);
+    Isometry3::from_parts(Translation3::new(mx, my, alt), q)
+}
+
+#[test]
+fn kitti_frames_0_to_5() {
+    let Some(root) = data_dir("kitti_raw_2011_09_26_drive_0001_mini/2011_09_26") else {
+        return;
+    };
+    let cam_txt = std::fs::read_to_string(root.join("calib_cam_to_cam.txt")).unwrap();
+    let p = calib_row(&cam_txt, "P_rect_00");
+    let camera = CameraModel {
+        width: 1242,
+        height: 375,
+        fx: p[0],
+        fy: p[5],
+        cx: p[2],
+        cy: p[6],
+        distortion: Distortion::None,
+    };
+    let rrect = calib_row(&cam_txt, "R_rect_00");
+    let rect_from_cam0 = iso(&rrect, &[0.0, 0.0, 0.0]);
+    let iv = std::fs::read_to_string(root.join("calib_imu_to_velo.txt")).unwrap();
+    let vc = std::fs::read_to_string(root.join("calib_velo_to_cam.txt")).unwrap();
+    let velo_from_imu = iso(&calib_row(&iv, "R"), &calib_row(&iv, "T"));
+    let cam0_from_velo = iso(&calib_row(&vc, "R"), &calib_row(&vc, "T"));
+    let cam_from_imu = rect_from_cam0 * cam0_from_velo * velo_from_imu;
+    let seq = root.join("2011_09_26_drive_0001_sync");
+    let ox: Vec<Vec<f64>> = (0..5)
+        .map(|k| {
+            numbers(&std::fs::read_to_string(seq.join(format!("oxts/data/{k:010}.txt"))).unwrap())
+        })
+        .collect();
+    let scale = ox[0][0].to_radians().cos();
+    let mut world_from_cam: Vec<Isometry3<f64>> = ox
+        .iter()
+        .map(|v| oxts_pose(v, scale) * cam_from_imu.inverse())
+        .collect();
+    // OXTS stops at frame 4: extrapolate frame 5 with the 3→4 motion (straight, ~constant speed)
+    let step = world_from_cam[3].inverse() * world_from_cam[4];
+    world_from_cam.push(world_from_cam[4] * step);
+    let frame = |k: usize| std::fs::read(seq.join(format!("image_00/data/{k:010}.png"))).unwrap();
+    let truth = |a: usize, b: usize| world_from_cam[b].inverse() * world_from_cam[a];
+    // consecutive pairs 0→1 … 4→5 (10 Hz), as the front end runs
+    let mut fe = FrontEnd::new(&camera, Isometry3::identity(), VisionParams::default());
+    let _ = fe.process(0, ImageFormat::Png, &frame(0), &MotionPrior::default());
+    for k in 1..=5usize {
+        let res = fe.process(
+            k as i64 * 103_000_000,
+            ImageFormat::Png,
+            &frame(k),
+            &MotionPrior::default(),
+        );
+        let ego = res
+            .outcome
+            .as_ref()
+            .unwrap_or_else(|e| panic!("{}→{k}: no measurement: {e}", k - 1));
+        let tr = truth(k - 1, k);
+        let err = pair_error(ego, &tr.rotation, &tr.translation.vector);
+        let (rot_deg, dir_deg) = (
+            err.rot_err_rad.to_degrees(),
+            err.t_dir_err_rad.unwrap_or(f64::NAN).to_degrees(),
+        );
+        eprintln!(
+            "KITTI {}→{k}: {:?}, tracked {}, inliers {}, rotation err {rot_deg:.4}° (true {:.3}°), direction err {dir_deg:.3}°",
+            k - 1,
+            ego.solver,
+            ego.tracked,
+            ego.inliers,
+            tr.rotation.angle().to_degrees()
+        );
+        assert!(rot_deg < 0.2, "{}→{k}: rotation err {rot_deg}°", k - 1);
+        assert!(dir_deg < 3.0, "{}→{k}: direction err {dir_deg}°", k - 1);
+    }
+    // the direct 0→5 pair (6.7 m of forward motion: strong scale change near the edges)
+    let params = VisionParams {
+        pyramid_levels: 4,
+        max_features: 400,
+        ..VisionParams::default()
+    };
+    let mut fe = FrontEnd::new(&camera, Isometry3::identity(), params);
+    let _ = fe.process(0, ImageFormat::Png, &frame(0), &MotionPrior::default());
+    let res = fe.process(
+        5 * 103_000_000,
+        ImageFormat::Png,
+        &frame(5),
+        &MotionPrior::default(),
+    );
+    let ego = res
+        .outcome
+        .as_ref()
+        .unwrap_or_else(|e| panic!("0→5: no measurement: {e}"));
+    let tr = truth(0, 5);
+    let err = pair_error(ego, &tr.rotation, &tr.translation.vector);
+    let (rot_deg, dir_deg) = (
+        err.rot_err_rad.to_degrees(),
+        err.t_dir_err_rad.unwrap_or(f64::NAN).to_degrees(),
+    );
+    eprintln!(
+        "KITTI 0→5 direct: {:?}, tracked {}, inliers {}, rotation err {rot_deg:.4}° (est {:?} true {:?}), t {:?} true {:?} direction err {dir_deg:.3}°",
+        ego.solver,
+        ego.cam1_from_cam0
+            .scaled_axis()
+            .map(f64::to_degrees)
+            .transpose(),
+        tr.rotation.scaled_axis().map(f64::to_degrees).transpose(),
+        ego.t_dir_cam1.map(|u| u.into_inner().transpose()),
+        tr.translation.vector.transpose(),
+        ego.tracked,
+        ego.inliers,
+    );
+    assert!(rot_deg < 0.2, "0→5: rotation err {rot_deg}°");
+    assert!(dir_deg < 3.0, "0→5: direction err {dir_deg}°");
+}
+
+fn euroc_camera() -> CameraModel {
+    CameraModel {
+        width: 752,
+        height: 480,
+        fx: 458.654,
+        fy: 457.296,
+        cx: 367.215,
+        cy: 248.375,
+        distortion: Distortion::RadTan {
+            k1: -0.28340811,
+            k2: 0.07395907,
+            p1: 0.00019359,
+            p2: 1.76187114e-05,
+        },
+    }
+}
+
+fn euroc_body_from_cam0() -> Isometry3<f64> {
+    let r = [
+        0.0148655429818,
+        -0.999880929698,
+        0.00414029679422,
+        0.999557249008,
+        0.0149672133247,
+        0.025715529948,
+        -0.0257744366974,
+        0.00375618835797,
+        0.999660727178,
+    ];
+    iso(&r, &[-0.0216401454975, -0.064676986768, 0.00981073058949])
+}
+
+#[test]
+fn euroc_static_frames_are_rotation_only() {
+    let Some(root) = data_dir("euroc_v1_01_easy_kimera/mav0/cam0") else {
+        return;
+    };
+    let list = std::fs::read_to_string(root.join("data.csv")).unwrap();
+    let files: Vec<(i64, String)> = list
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .filter_map(|l| {
+            let mut it = l.split(',');
+            Some((
+                it.next()?.trim().parse().ok()?,
+                it.next()?.trim().to_string(),
+            ))
+        })
+        .take(12)
+        .collect();
+    let mut fe = FrontEnd::new(
+        &euroc_camera(),
+        euroc_body_from_cam0(),
+        VisionParams::default(),
+    );
+    let mut worst = 0.0f64;
+    for (k, (t_ns, f)) in files.iter().enumerate() {
+        let data = std::fs::read(root.join("data").join(f)).unwrap();
+        let res = fe.process(*t_ns, ImageFormat::Png, &data, &MotionPrior::default());
+        if k == 0 {
+            continue;
+        }
+        let ego = res
+            .outcome
+            .as_ref()
+            .unwrap_or_else(|e| panic!("frame {k}: no measurement: {e}"));
+        let ang = ego.cam1_from_cam0.angle().to_degrees();
+        worst = worst.max(ang);
+        assert_eq!(ego.solver, EgomotionSolver::RotationOnly, "frame {k}");
+        assert!(ego.t_dir_cam1.is_none());
+        assert!(ang <= 0.05, "frame {k}: rotation {ang}°");
+    }
+    eprintln!(
+        "EuRoC static: {} pairs rotation-only, largest rotation {worst:.4}°",
+        files.len() - 1
+    );
+}
+
+#[test]
+fn euroc_lcd_pair_2_to_3_with_gyro_prior() {
+    let Some(root) = data_dir("euroc_v1_01_easy_kimera") else {
+        return;
+    };
+    let poses = std::fs::read_to_string(root.join("lcd_pairs/poses_world_T_body.csv")).unwrap();
+    let pose = |name: &str| -> (i64, Isometry3<f64>) {
+        let line = poses.lines().find(|l| l.starts_with(name)).unwrap();
+        let f: Vec<&str> = line.split(',').collect();
+        let v: Vec<f64> = f[2..].iter().map(|s| s.trim().parse().unwrap()).collect();
+        let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(v[3], v[4], v[5], v[6]));
+        (
+            f[1].trim().parse().unwrap(),
+            Isometry3::from_parts(Translation3::new(v[0], v[1], v[2]), q),
+        )
+    };
+    let (t2, w_b2) = pose("left_img_2/");
+    let (t3, w_b3) = pose("left_img_3/");
+    let imu_txt = std::fs::read_to_string(root.join("mav0/imu0/data.csv")).unwrap();
+    let imu: Vec<ImuSample> = imu_txt
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .filter_map(|l| {
+            let v: Vec<f64> = l.split(',').filter_map(|s| s.trim().parse().ok()).collect();
+            let t_ns: i64 = l.split(',').next()?.trim().parse().ok()?;
+            (v.len() == 7).then(|| ImuSample {
+                t_ns,
+                gyro_radps: Vector3::new(v[1], v[2], v[3]),
+                accel_mps2: Vector3::new(v[4], v[5], v[6]),
+            })
+        })
+        .collect();
+    let b_c = euroc_body_from_cam0();
+    let mut fe = FrontEnd::new(&euroc_camera(), b_c, VisionParams::default());
+    // img_3 is 0.5 s *before* img_2: integrate t3→t2 and invert for body3_from_body2
+    let b2_from_b3 = gyro_rotation(&imu, t3, t2, &Vector3::zeros()).unwrap();
+    let prior = MotionPrior {
+        cam1_from_cam0: Some(fe.cam_rotation_from_body(&b2_from_b3.inverse())),
+        rot_sigma_rad: 0.01,
+        ..MotionPrior::default()
+    };
+    let img = |k: u32| std::fs::read(root.join(format!("lcd_pairs/left_img_{k}.png"))).unwrap();
+    let _ = fe.process(t2, ImageFormat::Png, &img(2), &MotionPrior::default());
+    let res = fe.process(t3, ImageFormat::Png, &img(3), &prior);
+    let truth = (w_b3 * b_c).inverse() * (w_b2 * b_c);
+    let prior_err = (prior.cam1_from_cam0.unwrap() * truth.rotation.inverse())
+        .angle()
+        .to_degrees();
+    let ego = res
+        .outcome
+        .as_ref()
+        .unwrap_or_else(|e| panic!("no measurement: {e}"));
+    let err = pair_error(ego, &truth.rotation, &truth.translation.vector);
+    eprintln!(
+        "EuRoC lcd 2→3: solver {:?}, tracked {}, inliers {}, true rotation {:.2}°, gyro prior err {prior_err:.3}°, rotation err {:.3}°, direction err {:.2}°",
+        ego.solver,
+        ego.tracked,
+        ego.inliers,
+        truth.rotation.angle().to_degrees(),
+        err.rot_err_rad.to_degrees(),
+        err.t_dir_err_rad.unwrap_or(f64::NAN).to_degrees()
+    );
+    assert!(err.rot_err_rad.to_degrees() < 1.0);
+}
