@@ -1,0 +1,218 @@
+//! Vehicle configuration: IMU noise, GNSS lever arm, camera model and mount, profile.
+
+use uavnav_core::{
+    CameraConfig, CameraModel, Distortion, FilterProfile, GnssConfig, ImuConfig, VehicleConfig,
+};
+
+use super::geometry::{isometry, required_vector3};
+use super::{ConvertError, finite, in_range, non_negative, positive, required};
+use crate::v1;
+
+/// Largest accepted sensor rate, Hz.
+const MAX_RATE_HZ: f64 = 100_000.0;
+/// Largest accepted image side, px.
+const MAX_IMAGE_SIDE_PX: u32 = 16_384;
+/// Accepted terrain elevation range, m (ellipsoidal).
+const TERRAIN_RANGE_M: (f64, f64) = (-1_000.0, 10_000.0);
+
+impl TryFrom<&v1::ImuConfig> for ImuConfig {
+    type Error = ConvertError;
+    fn try_from(c: &v1::ImuConfig) -> Result<Self, ConvertError> {
+        Ok(ImuConfig {
+            rate_hz: positive("rate_hz", c.rate_hz, MAX_RATE_HZ)?,
+            gyro_noise_density: non_negative("gyro_noise_density", c.gyro_noise_density)?,
+            gyro_random_walk: non_negative("gyro_random_walk", c.gyro_random_walk)?,
+            accel_noise_density: non_negative("accel_noise_density", c.accel_noise_density)?,
+            accel_random_walk: non_negative("accel_random_walk", c.accel_random_walk)?,
+        })
+    }
+}
+
+impl From<&ImuConfig> for v1::ImuConfig {
+    fn from(c: &ImuConfig) -> Self {
+        v1::ImuConfig {
+            rate_hz: c.rate_hz,
+            gyro_noise_density: c.gyro_noise_density,
+            gyro_random_walk: c.gyro_random_walk,
+            accel_noise_density: c.accel_noise_density,
+            accel_random_walk: c.accel_random_walk,
+        }
+    }
+}
+
+impl TryFrom<&v1::GnssConfig> for GnssConfig {
+    type Error = ConvertError;
+    fn try_from(c: &v1::GnssConfig) -> Result<Self, ConvertError> {
+        Ok(GnssConfig {
+            rate_hz: positive("rate_hz", c.rate_hz, MAX_RATE_HZ)?,
+            lever_arm_body_m: required_vector3("lever_arm_body_m", &c.lever_arm_body_m)?,
+        })
+    }
+}
+
+impl From<&GnssConfig> for v1::GnssConfig {
+    fn from(c: &GnssConfig) -> Self {
+        v1::GnssConfig {
+            rate_hz: c.rate_hz,
+            lever_arm_body_m: Some((&c.lever_arm_body_m).into()),
+        }
+    }
+}
+
+fn image_side(field: &str, px: u32) -> Result<u32, ConvertError> {
+    if (1..=MAX_IMAGE_SIDE_PX).contains(&px) {
+        Ok(px)
+    } else {
+        Err(ConvertError::OutOfRange {
+            field: field.to_owned(),
+            value: f64::from(px),
+            range: format!("[1, {MAX_IMAGE_SIDE_PX}]"),
+        })
+    }
+}
+
+fn distortion(c: &v1::CameraConfig) -> Result<Distortion, ConvertError> {
+    use v1::DistortionModel as M;
+    let k1 = finite("k1", c.k1)?;
+    let k2 = finite("k2", c.k2)?;
+    let p1 = finite("p1", c.p1)?;
+    let p2 = finite("p2", c.p2)?;
+    let all_zero = [k1, k2, p1, p2].iter().all(|&k| k == 0.0);
+    match M::try_from(c.distortion_model) {
+        Ok(M::None) => Ok(Distortion::None),
+        Ok(M::RadialTangential) => Ok(Distortion::RadTan { k1, k2, p1, p2 }),
+        // Unset with no coefficients unambiguously means an ideal pinhole.
+        Ok(M::Unspecified) if all_zero => Ok(Distortion::None),
+        _ => Err(ConvertError::UnknownEnum {
+            field: "distortion_model".to_owned(),
+            value: c.distortion_model,
+        }),
+    }
+}
+
+impl TryFrom<&v1::CameraConfig> for CameraModel {
+    type Error = ConvertError;
+    fn try_from(c: &v1::CameraConfig) -> Result<Self, ConvertError> {
+        Ok(CameraModel {
+            width: image_side("width_px", c.width_px)?,
+            height: image_side("height_px", c.height_px)?,
+            fx: positive("fx_px", c.fx_px, 1.0e6)?,
+            fy: positive("fy_px", c.fy_px, 1.0e6)?,
+            cx: in_range("cx_px", c.cx_px, -1.0e5, 1.0e5)?,
+            cy: in_range("cy_px", c.cy_px, -1.0e5, 1.0e5)?,
+            distortion: distortion(c)?,
+        })
+    }
+}
+
+impl TryFrom<&v1::CameraConfig> for CameraConfig {
+    type Error = ConvertError;
+    fn try_from(c: &v1::CameraConfig) -> Result<Self, ConvertError> {
+        // The core configuration holds camera 0 only; refusing others beats silently mislabelling.
+        if c.camera_id != 0 {
+            return Err(ConvertError::invalid(
+                "camera_id",
+                format!("{} unsupported (only camera 0)", c.camera_id),
+            ));
+        }
+        let body_from_cam = isometry(
+            "body_from_cam",
+            required("body_from_cam", &c.body_from_cam)?,
+        )?;
+        Ok(CameraConfig {
+            rate_hz: positive("rate_hz", c.rate_hz, MAX_RATE_HZ)?,
+            model: CameraModel::try_from(c)?,
+            body_from_cam,
+        })
+    }
+}
+
+impl From<&CameraConfig> for v1::CameraConfig {
+    fn from(c: &CameraConfig) -> Self {
+        let m = &c.model;
+        let (model, [k1, k2, p1, p2]) = match m.distortion {
+            Distortion::None => (v1::DistortionModel::None, [0.0; 4]),
+            Distortion::RadTan { k1, k2, p1, p2 } => {
+                (v1::DistortionModel::RadialTangential, [k1, k2, p1, p2])
+            }
+        };
+        v1::CameraConfig {
+            camera_id: 0,
+            rate_hz: c.rate_hz,
+            width_px: m.width,
+            height_px: m.height,
+            fx_px: m.fx,
+            fy_px: m.fy,
+            cx_px: m.cx,
+            cy_px: m.cy,
+            distortion_model: model as i32,
+            k1,
+            k2,
+            p1,
+            p2,
+            body_from_cam: Some((&c.body_from_cam).into()),
+        }
+    }
+}
+
+/// Wire profile → core; `UNSPECIFIED` means the default (ESKF).
+pub fn filter_profile(field: &str, raw: i32) -> Result<FilterProfile, ConvertError> {
+    use v1::FilterProfile as W;
+    match W::try_from(raw) {
+        Ok(W::Unspecified) => Ok(FilterProfile::default()),
+        Ok(W::Eskf) => Ok(FilterProfile::Eskf),
+        Ok(W::Paper) => Ok(FilterProfile::Paper),
+        Err(_) => Err(ConvertError::UnknownEnum {
+            field: field.to_owned(),
+            value: raw,
+        }),
+    }
+}
+
+impl From<FilterProfile> for v1::FilterProfile {
+    fn from(p: FilterProfile) -> Self {
+        match p {
+            FilterProfile::Eskf => v1::FilterProfile::Eskf,
+            FilterProfile::Paper => v1::FilterProfile::Paper,
+        }
+    }
+}
+
+impl TryFrom<&v1::VehicleConfig> for VehicleConfig {
+    type Error = ConvertError;
+    fn try_from(c: &v1::VehicleConfig) -> Result<Self, ConvertError> {
+        let imu = ImuConfig::try_from(required("imu", &c.imu)?).map_err(|e| e.within("imu"))?;
+        let gnss = c
+            .gnss
+            .as_ref()
+            .map(GnssConfig::try_from)
+            .transpose()
+            .map_err(|e| e.within("gnss"))?;
+        let camera = c
+            .camera
+            .as_ref()
+            .map(CameraConfig::try_from)
+            .transpose()
+            .map_err(|e| e.within("camera"))?;
+        let (lo, hi) = TERRAIN_RANGE_M;
+        Ok(VehicleConfig {
+            imu,
+            gnss,
+            camera,
+            terrain_elevation_m: in_range("terrain_elevation_m", c.terrain_elevation_m, lo, hi)?,
+            profile: filter_profile("profile", c.profile)?,
+        })
+    }
+}
+
+impl From<&VehicleConfig> for v1::VehicleConfig {
+    fn from(c: &VehicleConfig) -> Self {
+        v1::VehicleConfig {
+            imu: Some((&c.imu).into()),
+            gnss: c.gnss.as_ref().map(Into::into),
+            camera: c.camera.as_ref().map(Into::into),
+            terrain_elevation_m: c.terrain_elevation_m,
+            profile: v1::FilterProfile::from(c.profile) as i32,
+        }
+    }
+}
