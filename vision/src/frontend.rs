@@ -8,9 +8,15 @@ use uavnav_core::{CameraModel, Egomotion, ImageFormat, MotionPrior};
 
 use crate::decode::{DecodeError, LumaDecoder};
 use crate::essential::to_quat;
-use crate::klt::{KltParams, KltScratch, best_corner_in, track_point};
+use crate::klt::{Affine, KltParams, KltScratch, best_corner_in, track_point};
 use crate::pyramid::{Pyramid, frame_stats};
 use crate::solve::{SolveParams, SolveScratch, solve};
+
+/// Inverse of a 2×2 row-major matrix.
+fn invert2(a: [f32; 4]) -> Option<[f32; 4]> {
+    let det = a[0] * a[3] - a[1] * a[2];
+    (det.abs() > 1e-6).then(|| [a[3] / det, -a[1] / det, -a[2] / det, a[0] / det])
+}
 
 /// Why a frame pair gave no egomotion.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -450,6 +456,34 @@ impl FrontEnd {
         }
     }
 
+    /// Prediction plus its local affine map (finite differences of [`Self::predict`] over one
+    /// pixel); the map is dropped when it is within 3% of the identity (fast path).
+    fn predict_affine(
+        &self,
+        px: [f32; 2],
+        ray: &Vector3<f64>,
+        r: &Matrix3<f64>,
+        prior: &MotionPrior,
+    ) -> ([f32; 2], Affine) {
+        let g = self.predict(px, ray, r, prior);
+        let mut cols = [[0.0f32; 2]; 2];
+        for (k, col) in cols.iter_mut().enumerate() {
+            let q = [
+                px[0] + if k == 0 { 1.0 } else { 0.0 },
+                px[1] + if k == 1 { 1.0 } else { 0.0 },
+            ];
+            let n = self
+                .camera
+                .pixel_to_normalized(&Point2::new(f64::from(q[0]), f64::from(q[1])));
+            let gq = self.predict(q, &Vector3::new(n.x, n.y, 1.0), r, prior);
+            *col = [gq[0] - g[0], gq[1] - g[1]];
+        }
+        let a = [cols[0][0], cols[1][0], cols[0][1], cols[1][1]];
+        let dev = (a[0] - 1.0).abs() + a[1].abs() + a[2].abs() + (a[3] - 1.0).abs();
+        let sane = a.iter().all(|v| v.is_finite()) && (a[0] * a[3] - a[1] * a[2]) > 0.25;
+        (g, (dev > 0.03 && sane).then_some(a))
+    }
+
     fn track(&mut self, prior: &MotionPrior) {
         self.m_x0.clear();
         self.m_x1.clear();
@@ -474,29 +508,32 @@ impl FrontEnd {
         let fb2 = self.params.fb_threshold_px * self.params.fb_threshold_px;
         for i in 0..self.pts.len() {
             let p0 = self.pts[i];
-            let guess = if aid {
-                self.predict(p0, &self.rays[i], &r, prior)
+            let (guess, affine) = if aid {
+                self.predict_affine(p0, &self.rays[i], &r, prior)
             } else {
-                p0
+                (p0, None)
             };
             let Some(p1) = track_point(
                 &self.prev,
                 &self.cur,
                 p0,
                 guess,
+                affine,
                 top,
                 &self.params.klt,
                 &mut self.klt,
             ) else {
                 continue;
             };
-            // backward: start from the inverse prediction (p0 shifted by the forward correction)
+            // backward: start from the inverse prediction (p1 shifted back by the predicted flow)
             let bg = [p1[0] - (guess[0] - p0[0]), p1[1] - (guess[1] - p0[1])];
+            let back_affine = affine.and_then(invert2);
             let Some(pb) = track_point(
                 &self.cur,
                 &self.prev,
                 p1,
                 bg,
+                back_affine,
                 top,
                 &self.params.klt,
                 &mut self.klt,

@@ -37,7 +37,14 @@ pub struct KltScratch {
     patch: Vec<f32>,
 }
 
+/// Local affine map of the predicted motion: a window offset `x` in `prev` appears at `A x`
+/// in `next` (row-major `[a00, a01, a10, a11]`). `None` = identity (fast path).
+pub type Affine = Option<[f32; 4]>;
+
 /// Tracks a point from `prev` into `next`.
+///
+/// With `affine`, the window in `next` is sampled on the predicted warped grid, so large
+/// predicted rotations (IMU aid) do not break the translation-only window model.
 ///
 /// `p0` is the point in `prev` (level-0 px), `guess` its predicted position in `next`; the
 /// search starts at `top_level` (≤ pyramid depth − 1) from the guess. Returns the tracked
@@ -47,6 +54,7 @@ pub fn track_point(
     next: &Pyramid,
     p0: [f32; 2],
     guess: [f32; 2],
+    affine: Affine,
     top_level: usize,
     params: &KltParams,
     s: &mut KltScratch,
@@ -62,6 +70,7 @@ pub fn track_point(
             &next.levels[level],
             pl,
             flow,
+            affine,
             params,
             s,
         ) {
@@ -84,6 +93,7 @@ fn track_level(
     next: &GrayF32,
     p: [f32; 2],
     mut flow: [f32; 2],
+    affine: Affine,
     params: &KltParams,
     s: &mut KltScratch,
 ) -> Option<[f32; 2]> {
@@ -136,10 +146,21 @@ fn track_level(
     let inv = 1.0 / det;
     for _ in 0..params.max_iterations {
         let (qx, qy) = (p[0] + flow[0], p[1] + flow[1]);
-        if !next.window_inside(qx, qy, r) {
-            return None;
+        match affine {
+            None => {
+                if !next.window_inside(qx, qy, r) {
+                    return None;
+                }
+                next.sample_patch(qx - r as f32, qy - r as f32, side, &mut s.patch);
+            }
+            Some(a) => {
+                let reach = (a[0].abs() + a[1].abs()).max(a[2].abs() + a[3].abs());
+                if !next.window_inside(qx, qy, (r as f32 * reach).ceil() as usize) {
+                    return None;
+                }
+                sample_warped(next, [qx, qy], &a, r, &mut s.patch);
+            }
         }
-        next.sample_patch(qx - r as f32, qy - r as f32, side, &mut s.patch);
         let jmean = s.patch[..n].iter().sum::<f32>() / nf;
         let (mut bx, mut by) = (0.0f32, 0.0f32);
         for i in 0..n {
@@ -147,8 +168,12 @@ fn track_level(
             bx += e * s.gx[i];
             by += e * s.gy[i];
         }
-        let dx = inv * (gyy * bx - gxy * by);
-        let dy = inv * (gxx * by - gxy * bx);
+        // the update is in template coordinates; in `next` it is A·δ
+        let (ux, uy) = (inv * (gyy * bx - gxy * by), inv * (gxx * by - gxy * bx));
+        let (dx, dy) = match affine {
+            None => (ux, uy),
+            Some(a) => (a[0] * ux + a[1] * uy, a[2] * ux + a[3] * uy),
+        };
         flow[0] += dx;
         flow[1] += dy;
         if dx * dx + dy * dy < params.epsilon_px * params.epsilon_px {
@@ -156,6 +181,25 @@ fn track_level(
         }
     }
     Some(flow)
+}
+
+/// Samples the window `q + A x`, `x ∈ [−r, r]²`, by per-pixel bilinear interpolation.
+fn sample_warped(img: &GrayF32, q: [f32; 2], a: &[f32; 4], r: usize, out: &mut [f32]) {
+    let side = 2 * r + 1;
+    let w = img.width;
+    for yy in 0..side {
+        let y = yy as f32 - r as f32;
+        for xx in 0..side {
+            let x = xx as f32 - r as f32;
+            let (sx, sy) = (q[0] + a[0] * x + a[1] * y, q[1] + a[2] * x + a[3] * y);
+            let (fx, fy) = (sx.floor(), sy.floor());
+            let (ax, ay) = (sx - fx, sy - fy);
+            let i = fy as usize * w + fx as usize;
+            let d = &img.data;
+            out[yy * side + xx] = (1.0 - ay) * ((1.0 - ax) * d[i] + ax * d[i + 1])
+                + ay * ((1.0 - ax) * d[i + w] + ax * d[i + w + 1]);
+        }
+    }
 }
 
 /// Shi–Tomasi score (mean minimum eigenvalue of the 5×5 structure tensor) at an integer pixel.
@@ -254,7 +298,7 @@ mod tests {
                     m[0][0] * px + m[0][1] * py + off[0],
                     m[1][0] * px + m[1][1] * py + off[1],
                 ];
-                let got = track_point(&pa, &pb, p, p, 2, &params, &mut sc).unwrap();
+                let got = track_point(&pa, &pb, p, p, None, 2, &params, &mut sc).unwrap();
                 let err = ((f64::from(got[0]) - want[0]).powi(2)
                     + (f64::from(got[1]) - want[1]).powi(2))
                 .sqrt();
