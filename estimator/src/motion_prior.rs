@@ -50,6 +50,74 @@ pub fn gyro_rotation(
     Some(q)
 }
 
+/// Attitudes at the frame times and the displacement between them, carried back from the newest
+/// state through the retained IMU samples (backward strapdown; Earth rate and Coriolis neglected
+/// over a fraction of a second).
+#[derive(Debug, Clone, Copy)]
+struct Backward {
+    c0: UnitQuaternion<f64>,
+    c1: UnitQuaternion<f64>,
+    /// Body displacement p(t1) − p(t0), m.
+    disp: Vector3<f64>,
+}
+
+fn carry_back(
+    imu: &VecDeque<ImuSample>,
+    now: &NowState,
+    g: &Vector3<f64>,
+    t0_ns: i64,
+    t1_ns: i64,
+) -> Option<Backward> {
+    if imu.front()?.t_ns > t0_ns || t1_ns < t0_ns {
+        return None;
+    }
+    let (mut c, mut v) = (now.q, now.v);
+    let (mut c0, mut c1) = (None, if t1_ns >= now.t_ns { Some(now.q) } else { None });
+    let mut disp = Vector3::zeros();
+    let pairs: Vec<(&ImuSample, &ImuSample)> = imu.iter().zip(imu.iter().skip(1)).collect();
+    for (a, b) in pairs.into_iter().rev() {
+        if a.t_ns >= now.t_ns {
+            continue;
+        }
+        // Split the interval at the frame times so the attitudes are exact there.
+        let mut cuts = vec![b.t_ns.min(now.t_ns)];
+        for t in [t1_ns, t0_ns] {
+            if t > a.t_ns && t < cuts[cuts.len() - 1] {
+                cuts.push(t);
+            }
+        }
+        cuts.push(a.t_ns);
+        for w in cuts.windows(2) {
+            let (hi, lo) = (w[0], w[1]);
+            let m = mean_of(&interp(a, b, lo), &interp(a, b, hi));
+            let dt = (hi - lo) as f64 * 1e-9;
+            let half = UnitQuaternion::from_scaled_axis((m.gyro - now.bg) * (-0.5 * dt));
+            let c_mid = c * half;
+            let acc = c_mid * m.accel + g;
+            let v_lo = v - acc * dt;
+            if lo >= t0_ns && hi <= t1_ns {
+                disp += (v + v_lo) * (0.5 * dt);
+            }
+            c = c_mid * half;
+            v = v_lo;
+            if lo == t1_ns {
+                c1 = Some(c);
+            }
+            if lo == t0_ns {
+                c0 = Some(c);
+            }
+        }
+        if c0.is_some() {
+            break;
+        }
+    }
+    Some(Backward {
+        c0: c0?,
+        c1: c1?,
+        disp,
+    })
+}
+
 /// Builds the prior: gyro rotation `cam1_from_cam0`, the ground normal and distance in camera 0
 /// (flat terrain at `terrain_elevation_m` above the ellipsoid), and `t` from the velocity.
 #[allow(clippy::too_many_arguments)]
@@ -72,21 +140,22 @@ pub fn prior(
     prior.cam1_from_cam0 = Some(r_bc.inverse() * b0_from_b1.inverse() * r_bc);
     let dt_s = (t1_ns - t0_ns) as f64 * 1e-9;
     prior.rot_sigma_rad = gyro_noise_density * dt_s.sqrt() + gyro_bias_sigma * dt_s;
-    // Attitudes at the frame times: the newest attitude carried back by the gyros.
-    let back =
-        |t: i64| gyro_rotation(imu, t, now.t_ns.max(t), &now.bg).map(|r| now.q * r.inverse());
-    let (Some(c0), Some(c1)) = (back(t0_ns), back(t1_ns)) else {
+    let g = frame.gravity_ned(&now.p);
+    let Some(back) = carry_back(imu, now, &g, t0_ns, t1_ns) else {
         return prior;
     };
+    let (c0, c1) = (back.c0, back.c1);
     let r_c0n = (c0 * r_bc).inverse();
-    prior.ground_normal_cam0 = Some(Unit::new_normalize(r_c0n * Vector3::z()));
-    let p0 = now.p - now.v * ((now.t_ns - t0_ns) as f64 * 1e-9);
-    let cam0 = p0 + c0 * body_from_cam.translation.vector;
     let n_cam0 = r_c0n * Vector3::z();
-    let h = frame.ned_to_lla(&cam0).alt_m - terrain_elevation_m;
-    if h > 0.0 && n_cam0.norm() > 0.0 {
+    prior.ground_normal_cam0 = Some(Unit::new_normalize(n_cam0));
+    let t_bc = body_from_cam.translation.vector;
+    let p0 = now.p - now.v * ((now.t_ns - t0_ns) as f64 * 1e-9);
+    let h = frame.ned_to_lla(&(p0 + c0 * t_bc)).alt_m - terrain_elevation_m;
+    if h > 0.0 {
         prior.ground_distance_m = Some(h);
     }
-    prior.t_cam1_m = Some(-((c1 * r_bc).inverse() * (now.v * dt_s)));
+    // t = R_c1n (centre0 − centre1), centre_k = p_k + C_k t_bc.
+    let d = -back.disp + c0 * t_bc - c1 * t_bc;
+    prior.t_cam1_m = Some((c1 * r_bc).inverse() * d);
     prior
 }

@@ -51,6 +51,12 @@ pub struct EstimatorParams {
     pub use_vision_rotation: bool,
     /// Use vision translation (direction or metric).
     pub use_vision_translation: bool,
+    /// Paper profile: PSD added to the gyro noise in VIDEO-IMU(1) for the un-modelled gyro bias
+    /// (the paper's filter has no bias state), (rad/s)²/Hz. Default ≈ (1e-4 rad/s)² × 10 s.
+    pub paper_gyro_instability_psd: f64,
+    /// Paper profile: the video pseudo-attitude (eq. 34) starts from the filter's attitude only
+    /// once every attitude σ is below this, rad (the "initial known value").
+    pub paper_video_start_sigma_rad: f64,
     /// Position σ above which the filter is declared diverged, m.
     pub diverged_pos_sigma_m: f64,
 }
@@ -79,6 +85,8 @@ impl Default for EstimatorParams {
             vision_cov_scale: 1.0,
             use_vision_rotation: true,
             use_vision_translation: true,
+            paper_gyro_instability_psd: 1e-7,
+            paper_video_start_sigma_rad: 0.5f64.to_radians(),
             diverged_pos_sigma_m: 5_000.0,
         }
     }

@@ -153,7 +153,7 @@ fn check_h<const M: usize>(
         assert!(
             err < tol,
             "{name} column {k}: fd {fd:?} vs H {:?}",
-            h_an.column(k)
+            h_an.column(k).into_owned()
         );
     }
 }

@@ -26,8 +26,10 @@ pub fn model(
     let mut h = SMatrix::<f64, 3, N>::zeros();
     h.fixed_view_mut::<3, 3>(0, IV)
         .copy_from(&Matrix3::identity());
+    // The attitude enters twice: rotating the lever velocity, and through ω_nb = ω_ib − Cᵀ ω_ie.
+    let c_r_ct = c.matrix() * skew(lever_b) * c.matrix().transpose();
     h.fixed_view_mut::<3, 3>(0, ITH)
-        .copy_from(&(-skew(&lever_vel_n)));
+        .copy_from(&(-skew(&lever_vel_n) + c_r_ct * skew(w_ie)));
     h.fixed_view_mut::<3, 3>(0, IBG)
         .copy_from(&(c.matrix() * skew(lever_b)));
     (z - pred, h)

@@ -140,6 +140,7 @@ impl AttitudeEkf {
         m: &Egomotion,
         body_from_cam: &Isometry3<f64>,
         gate: f64,
+        start_sigma_rad: f64,
         diag: &mut InnovDiag,
     ) {
         let r_bc = body_from_cam.rotation;
@@ -148,6 +149,9 @@ impl AttitudeEkf {
         let base = match self.pseudo {
             Some((t, q)) if t == m.t0_ns => Some(q),
             _ => {
+                if self.p.diagonal().max() > start_sigma_rad.powi(2) {
+                    return;
+                }
                 let e0 = self.euler_at(m.t0_ns);
                 self.pseudo_var = self.p.trace() / 3.0;
                 e0.map(|e| UnitQuaternion::from_euler_angles(e.x, e.y, e.z))

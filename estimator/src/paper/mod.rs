@@ -7,11 +7,12 @@
 //! | [`attitude`] | VIDEO-IMU(1): Euler angles from gyro rates (eq. 31) + video pseudo-attitude (eq. 34) |
 //! | [`posvel`] | GPS-IMU (eqs. 29, 30, 32, 33) and VIDEO-IMU(2) (eq. 35): position/velocity EKFs |
 //!
-//! Without video the paper's "IMU+GPS estimation" must still get attitude from somewhere: here the
-//! VIDEO-IMU(1) filter then fuses a GNSS-derived attitude — roll/pitch from the accelerometers
-//! compensated by the GNSS acceleration, yaw from the GNSS course (assumes no sideslip/crab) — with
-//! σ of a few degrees. This is our reading, not the paper's text; it is what makes the GNSS-only
-//! paper baseline as coarse (degrees) as the paper's Figures 2–3 show.
+//! The paper's "IMU+GPS estimation" must get attitude from somewhere: the VIDEO-IMU(1) filter
+//! fuses a GNSS-derived attitude at every fix — roll/pitch from the accelerometers compensated by
+//! the GNSS acceleration, yaw from the GNSS course (assumes no sideslip/crab) — with σ of a few
+//! degrees. This is our reading, not the paper's text. With video, the pseudo-attitude of eq. (34)
+//! starts from the filter's attitude once it has converged (its "initial known value") and is
+//! fused in addition. The un-modelled gyro bias is covered by extra process noise.
 
 pub mod attitude;
 pub mod posvel;
@@ -31,13 +32,14 @@ use crate::prediction::{GravityCache, earth_rate_ned};
 use attitude::AttitudeEkf;
 use posvel::PosVelEkf;
 
-/// Video older than this no longer counts as "video available" for the attitude aiding choice, ns.
-const VIDEO_TIMEOUT_NS: i64 = 1_000_000_000;
 /// No GNSS for this long activates VIDEO-IMU(2), ns.
 const OUTAGE_AFTER_NS: i64 = 1_000_000_000;
 /// σ of the GNSS-derived tilt and course pseudo-measurements, rad.
 const GNSS_TILT_SIGMA_RAD: f64 = 0.035;
 const GNSS_COURSE_SIGMA_RAD: f64 = 0.05;
+/// σ of the held speed of eq. (35) at the start of an outage, m/s, and its growth, m/s per s.
+const SPEED_SIGMA_MPS: f64 = 0.3;
+const SPEED_SIGMA_GROWTH_MPS_PER_S: f64 = 0.02;
 
 /// The paper's three filters.
 #[derive(Debug, Clone)]
@@ -57,7 +59,6 @@ pub struct PaperFilter {
     vio2: Option<PosVelEkf>,
     last_speed_mps: f64,
     last_fix: Option<(GnssMeas, Vector3<f64>)>,
-    last_video_t_ns: i64,
     f_sum: (Vector3<f64>, u32),
     init_f: VecDeque<Vector3<f64>>,
     health: Health,
@@ -87,7 +88,6 @@ impl PaperFilter {
             vio2: None,
             last_speed_mps: 0.0,
             last_fix: None,
-            last_video_t_ns: i64::MIN,
             f_sum: (Vector3::zeros(), 0),
             init_f: VecDeque::new(),
             health: Health::default(),
@@ -116,7 +116,6 @@ impl PaperFilter {
         fresh.vio2 = None;
         fresh.last_speed_mps = 0.0;
         fresh.last_fix = None;
-        fresh.last_video_t_ns = i64::MIN;
         fresh.f_sum = (Vector3::zeros(), 0);
         fresh.init_f.clear();
         fresh.health = Health::default();
@@ -154,7 +153,13 @@ impl PaperFilter {
         };
         let m = mean_of(&prev, s);
         let dt_s = (s.t_ns - prev.t_ns) as f64 * 1e-9;
-        att.predict(&m.gyro, &self.w_ie, dt_s, self.gyro_psd, s.t_ns);
+        att.predict(
+            &m.gyro,
+            &self.w_ie,
+            dt_s,
+            self.gyro_psd + self.params.paper_gyro_instability_psd,
+            s.t_ns,
+        );
         let c = att.rotation();
         let att_var = att.p.trace() / 3.0;
         let g = self
@@ -214,10 +219,8 @@ impl PaperFilter {
             self.try_init(&meas, &g, &a_n, &gyro);
             return;
         }
-        let video =
-            meas.t_ns - self.last_video_t_ns.max(i64::MIN + VIDEO_TIMEOUT_NS) <= VIDEO_TIMEOUT_NS;
         if let Some(att) = self.att.as_mut() {
-            if !video && f_mean.norm() > 1.0 {
+            if f_mean.norm() > 1.0 {
                 gnss_attitude_aiding(
                     att,
                     &f_mean,
@@ -297,9 +300,14 @@ impl PaperFilter {
         let (Some(bfc), Some(att)) = (self.body_from_cam, self.att.as_mut()) else {
             return;
         };
-        self.last_video_t_ns = m.t1_ns;
         let gate = self.params.gate_sigma;
-        att.video_update(m, &bfc, gate, &mut self.health.vision_rot);
+        att.video_update(
+            m,
+            &bfc,
+            gate,
+            self.params.paper_video_start_sigma_rad,
+            &mut self.health.vision_rot,
+        );
         let Some(v2) = self.vio2.as_mut() else { return };
         let Some(dir) = m
             .t_dir_cam1
@@ -314,9 +322,16 @@ impl PaperFilter {
         // Camera displacement c1 − c0 = −R_nc1 t (eq. 35's Δp, a unit vector), speed = last valid.
         let dir_n = -(c1 * bfc.rotation.to_rotation_matrix().matrix() * dir);
         let dir_sigma = m.t_cov.trace().max(0.0).sqrt().max(1e-3);
+        // |V| is held at the last valid value (eq. 35); the longer the outage, the less it is
+        // trusted (the vehicle may have sped up or slowed down).
+        let since_s = self
+            .last_fix
+            .map_or(0.0, |(f, _)| (m.t1_ns - f.t_ns).max(0) as f64 * 1e-9);
+        let speed_sigma = SPEED_SIGMA_MPS + SPEED_SIGMA_GROWTH_MPS_PER_S * since_s;
+        let sigma = ((self.last_speed_mps * dir_sigma).powi(2) + speed_sigma.powi(2)).sqrt();
         v2.update_velocity(
             &(dir_n * self.last_speed_mps),
-            (self.last_speed_mps * dir_sigma).max(0.05),
+            sigma,
             m.t1_ns,
             gate,
             &mut self.health.vision_trans,
@@ -435,7 +450,33 @@ fn gnss_attitude_aiding(
         return;
     };
     let (r, p, y) = q.euler_angles();
+    let y = if moving {
+        heading_without_sideslip(r, p, vel_n)
+    } else {
+        y
+    };
     let course_sigma = if moving { GNSS_COURSE_SIGMA_RAD } else { 1e3 };
     let sig = Vector3::new(GNSS_TILT_SIGMA_RAD, GNSS_TILT_SIGMA_RAD, course_sigma);
     att.update_euler(&Vector3::new(r, p, y), &sig, gate, att.t_ns, diag);
+}
+
+/// The heading that puts the velocity in the body x–z plane (coordinated flight, no sideslip) at
+/// the given roll and pitch: solves `(Cᵀ v)_y = 0` by Newton's method from the course. With an
+/// angle of attack in a banked turn the heading differs from the course; this accounts for it.
+pub fn heading_without_sideslip(roll: f64, pitch: f64, vel_n: &Vector3<f64>) -> f64 {
+    let (sr, cr) = roll.sin_cos();
+    let (sp, cp) = pitch.sin_cos();
+    let mut yaw = vel_n.y.atan2(vel_n.x);
+    for _ in 0..4 {
+        let (sy, cy) = yaw.sin_cos();
+        let u1 = cy * vel_n.x + sy * vel_n.y;
+        let u2 = -sy * vel_n.x + cy * vel_n.y;
+        let f = cr * u2 + sr * (sp * u1 + cp * vel_n.z);
+        let df = -cr * u1 + sr * sp * u2;
+        if df.abs() < 1e-9 {
+            break;
+        }
+        yaw -= f / df;
+    }
+    uavnav_core::rotation::wrap_pi(yaw)
 }

@@ -1,0 +1,99 @@
+//! Seeded scenario tests on the simulator's paper flights (250 s, 120 s GNSS outage), with the
+//! egomotion ORACLE synthesized from truth (tests only). Targets from issue 3, measured after 30 s.
+//! A full paper flight takes a few seconds in the dev profile, so all run in the normal `cargo test`.
+
+mod common;
+
+use common::{Oracle, RunCfg, outages_ns, run, scenario};
+use uavnav_core::FilterProfile;
+use uavnav_estimator::accuracy::AccuracyReport;
+use uavnav_sim::Flight;
+
+fn report(name: &str, cfg: &RunCfg) -> AccuracyReport {
+    let s = scenario(name, None);
+    let flight = Flight::new(&s).unwrap();
+    let outs = run(&flight, cfg);
+    let r = AccuracyReport::compute(name, &outs, flight.truth(), &outages_ns(&s));
+    eprintln!("{}", r.markdown_row());
+    r
+}
+
+fn eskf_targets(name: &str) -> AccuracyReport {
+    let r = report(
+        name,
+        &RunCfg::new(FilterProfile::Eskf, true, Some(Oracle::default())),
+    );
+    let att = r.att_rmse_deg.unwrap();
+    assert!(
+        att.x <= 0.1 && att.y <= 0.1,
+        "{name}: roll/pitch RMSE {att:?} deg"
+    );
+    assert!(att.z <= 0.3, "{name}: yaw RMSE {att:?} deg");
+    let drift = r.outages[0];
+    assert!(drift.percent <= 1.0, "{name}: outage drift {drift:?}");
+    // The drift must lie within the stated uncertainty (no overconfidence at the end of the outage).
+    assert!(
+        drift.horizontal_error_m <= 3.0 * drift.stated_sigma_h_m,
+        "{name}: {drift:?}"
+    );
+    assert!(
+        r.consistency.all_within_3sigma >= 0.95,
+        "{name}: {:?}",
+        r.consistency
+    );
+    r
+}
+
+#[test]
+fn eskf_meets_targets_small_lever_and_video_triples_yaw_accuracy() {
+    let with = eskf_targets("paper-small-lever");
+    let without = report(
+        "paper-small-lever",
+        &RunCfg::new(FilterProfile::Eskf, true, None),
+    );
+    let (yw, yo) = (
+        with.att_rmse_deg.unwrap().z,
+        without.att_rmse_deg.unwrap().z,
+    );
+    assert!(
+        yo >= 3.0 * yw,
+        "yaw RMSE GNSS-only {yo:.3}° vs with video {yw:.3}°: less than 3×"
+    );
+    // Without vision the outage is inertial coasting: worse than with the direction of travel.
+    assert!(without.outages[0].percent > with.outages[0].percent);
+    assert!(
+        without.consistency.all_within_3sigma >= 0.95,
+        "{:?}",
+        without.consistency
+    );
+}
+
+#[test]
+fn eskf_meets_targets_big_lever() {
+    eskf_targets("paper-big-lever");
+}
+
+#[test]
+fn paper_profile_reproduces_the_qualitative_results() {
+    let name = "paper-small-lever";
+    let video = report(
+        name,
+        &RunCfg::new(FilterProfile::Paper, true, Some(Oracle::default())),
+    );
+    let gnss = report(name, &RunCfg::new(FilterProfile::Paper, true, None));
+    // Figs. 4–5: with video (VIDEO-IMU(2)) the outage is bridged far better than by coasting.
+    assert!(
+        video.outages[0].percent < 0.5 * gnss.outages[0].percent,
+        "{:?} vs {:?}",
+        video.outages,
+        gnss.outages
+    );
+    // Figs. 2–3: video improves roll and pitch. (Yaw is NOT reproduced: the eq. (34) pseudo-attitude
+    // keeps the heading error of its starting value, while the GNSS-only baseline's course-based
+    // heading is very good in the wind-free simulator. Reported, not asserted.)
+    let (v, g) = (video.att_rmse_deg.unwrap(), gnss.att_rmse_deg.unwrap());
+    assert!(
+        v.x < g.x && v.y < g.y,
+        "paper attitude with video {v:?} vs GNSS-only {g:?}"
+    );
+}
