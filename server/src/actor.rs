@@ -1,0 +1,449 @@
+//! One actor per vehicle: a cloneable [`VehicleHandle`] and a task that alone owns the vehicle's
+//! [`Engine`](crate::engine::Engine).
+//!
+//! One bounded, ordered queue feeds the task (sensor data, configuration, reset, stop); senders
+//! wait when it is full, so IMU is never shed. Camera frames are shed instead of waiting when the
+//! vehicle already has `vehicles.camera_queue` frames queued, or when the vision pool is saturated
+//! at the moment the frame is due. Inputs pass through a [`ReorderBuffer`] and reach the engine in
+//! timestamp order; vision jobs run on the [`VisionPool`](crate::vision_pool::VisionPool).
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use tokio::sync::{mpsc, oneshot};
+use tracing::{Instrument, debug, info_span, warn};
+use uavnav_core::{CameraFrame, GnssFix, ImuSample, SensorEvent, VehicleConfig};
+use uavnav_proto::v1 as pb;
+
+use crate::config::VehiclesConfig;
+use crate::engine::{Engine, EngineStep, SharedFactory, VisionResult};
+use crate::health::HealthWindow;
+use crate::hub::Hub;
+use crate::metrics::Metrics;
+use crate::reorder::{Refused, ReorderBuffer};
+use crate::vehicle::{InputKind, VehicleShared, VehicleStats};
+use crate::vision_pool::VisionPool;
+
+/// Most inputs held in one reorder window whatever their timestamps (memory bound).
+const REORDER_CAPACITY: usize = 4096;
+/// IMU ingest times remembered to attribute latency to poses released late.
+const LATENCY_MEMORY: usize = 2048;
+
+/// Everything an actor needs from the service.
+#[derive(Debug)]
+pub struct Ctx {
+    /// Actor settings.
+    pub vehicles: VehiclesConfig,
+    /// Health publication period.
+    pub health_period: Duration,
+    /// Metrics.
+    pub metrics: Metrics,
+    /// Output fan-out.
+    pub hub: Hub,
+    /// Vision workers.
+    pub pool: Arc<VisionPool>,
+    /// Engine factory.
+    pub factory: SharedFactory,
+}
+
+impl Ctx {
+    /// The reorder window, ns.
+    pub fn window_ns(&self) -> i64 {
+        (self.vehicles.reorder_window_ms * 1e6) as i64
+    }
+
+    /// The future limit, ns.
+    pub fn max_future_ns(&self) -> i64 {
+        (self.vehicles.max_future_s * 1e9) as i64
+    }
+}
+
+/// One validated sensor input.
+#[derive(Debug, Clone)]
+pub enum Input {
+    /// IMU sample.
+    Imu(ImuSample),
+    /// GNSS fix.
+    Gnss(GnssFix),
+    /// Camera frame.
+    Camera(CameraFrame),
+}
+
+impl Input {
+    fn t_ns(&self) -> i64 {
+        match self {
+            Input::Imu(s) => s.t_ns,
+            Input::Gnss(g) => g.t_ns,
+            Input::Camera(c) => c.t_ns,
+        }
+    }
+
+    fn into_event(self) -> SensorEvent {
+        match self {
+            Input::Imu(s) => SensorEvent::Imu(s),
+            Input::Gnss(g) => SensorEvent::Gnss(g),
+            Input::Camera(c) => SensorEvent::Camera(c),
+        }
+    }
+
+    fn kind(&self) -> InputKind {
+        match self {
+            Input::Imu(_) => InputKind::Imu,
+            Input::Gnss(_) => InputKind::Gnss,
+            Input::Camera(_) => InputKind::Camera,
+        }
+    }
+}
+
+/// An input with its arrival time at the service.
+#[derive(Debug, Clone)]
+pub struct Stamped {
+    /// The input.
+    pub input: Input,
+    /// Arrival, service wall clock, ns since the UNIX epoch.
+    pub wall_ns: i64,
+    /// Arrival, monotonic clock.
+    pub at: Instant,
+}
+
+/// A message on the ordered queue.
+#[derive(Debug)]
+pub enum Msg {
+    /// IMU samples, a GNSS fix or a camera frame.
+    Data(Vec<Stamped>),
+    /// Replace the configuration (and the engine).
+    Configure {
+        /// The new configuration.
+        config: Box<VehicleConfig>,
+        /// Told when applied.
+        reply: Option<oneshot::Sender<()>>,
+    },
+    /// Restart the engine.
+    Reset {
+        /// Told when done.
+        reply: Option<oneshot::Sender<()>>,
+    },
+    /// Fuse what is queued, publish final health and stop.
+    Stop,
+}
+
+/// Why a message could not be queued.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SendError {
+    /// The actor is gone (evicted or stopping).
+    Closed,
+    /// The camera queue is full (the frame is shed).
+    Full,
+}
+
+/// The cloneable handle of a vehicle actor.
+#[derive(Debug, Clone)]
+pub struct VehicleHandle {
+    /// The shared face of the vehicle.
+    pub shared: Arc<VehicleShared>,
+    tx: mpsc::Sender<Msg>,
+}
+
+impl VehicleHandle {
+    /// Queues a message, waiting while the queue is full (back-pressure, never shedding).
+    pub async fn send(&self, msg: Msg) -> Result<(), SendError> {
+        self.tx.send(msg).await.map_err(|_| SendError::Closed)
+    }
+
+    /// Like [`VehicleHandle::send`], but hands the message back when the actor is gone, so the
+    /// caller can start a fresh actor and resend it.
+    pub async fn send_or_return(&self, msg: Msg) -> Result<(), Msg> {
+        self.tx.send(msg).await.map_err(|e| e.0)
+    }
+
+    /// Queues a camera frame unless the vehicle already has `limit` frames queued (then the
+    /// frame is shed: [`SendError::Full`]). Waits for room in the ordered queue otherwise.
+    pub async fn send_camera(&self, s: Stamped, limit: usize) -> Result<(), SendError> {
+        let queued = &self.shared.frames_queued;
+        if queued.fetch_add(1, std::sync::atomic::Ordering::AcqRel) >= limit {
+            queued.fetch_sub(1, std::sync::atomic::Ordering::AcqRel);
+            return Err(SendError::Full);
+        }
+        let r = self.tx.send(Msg::Data(vec![s])).await.map_err(|_| SendError::Closed);
+        if r.is_err() {
+            queued.fetch_sub(1, std::sync::atomic::Ordering::AcqRel);
+        }
+        r
+    }
+
+    /// Whether the actor has stopped.
+    pub fn is_closed(&self) -> bool {
+        self.tx.is_closed()
+    }
+}
+
+/// Starts a vehicle actor. `on_exit` runs when the task ends (eviction or shutdown).
+pub fn spawn(
+    shared: Arc<VehicleShared>,
+    config: VehicleConfig,
+    ctx: Arc<Ctx>,
+    on_exit: Box<dyn FnOnce(bool) + Send>,
+) -> VehicleHandle {
+    let (tx, rx) = mpsc::channel(ctx.vehicles.input_queue);
+    let engine = ctx.factory.create(&config);
+    let span = info_span!("vehicle", id = %shared.id);
+    let actor = Actor {
+        buffer: ReorderBuffer::new(ctx.window_ns(), REORDER_CAPACITY),
+        window: HealthWindow::new(Instant::now()),
+        shared: Arc::clone(&shared),
+        engine,
+        pending: None,
+        ingest_times: VecDeque::new(),
+        last_input: Instant::now(),
+        ctx,
+    };
+    tokio::spawn(
+        async move {
+            let evicted = actor.run(rx).await;
+            on_exit(evicted);
+        }
+        .instrument(span),
+    );
+    VehicleHandle { shared, tx }
+}
+
+struct Actor {
+    shared: Arc<VehicleShared>,
+    ctx: Arc<Ctx>,
+    engine: Box<dyn Engine>,
+    buffer: ReorderBuffer<Stamped>,
+    /// The outstanding vision job's result.
+    pending: Option<oneshot::Receiver<VisionResult>>,
+    /// (t_ns, arrival) of fused IMU samples, oldest first.
+    ingest_times: VecDeque<(i64, Instant, i64)>,
+    last_input: Instant,
+    window: HealthWindow,
+}
+
+async fn recv_vision(pending: &mut Option<oneshot::Receiver<VisionResult>>) -> Option<VisionResult> {
+    match pending {
+        Some(rx) => rx.await.ok(),
+        None => std::future::pending().await,
+    }
+}
+
+impl Actor {
+    /// The event loop; returns whether the actor was evicted for idleness.
+    async fn run(mut self, mut rx: mpsc::Receiver<Msg>) -> bool {
+        let mut tick = tokio::time::interval(self.ctx.health_period);
+        tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+        let idle = Duration::from_secs_f64(self.ctx.vehicles.idle_evict_s);
+        // An idle stream's last window is flushed after this much wall time without input.
+        let flush_after = Duration::from_secs_f64((self.ctx.vehicles.reorder_window_ms * 1e-3).max(0.005));
+        let evicted = loop {
+            let flush_at =
+                (!self.buffer.is_empty()).then(|| tokio::time::Instant::from_std(self.last_input + flush_after));
+            tokio::select! {
+                biased;
+                done = recv_vision(&mut self.pending), if self.pending.is_some() => self.on_vision(done),
+                msg = rx.recv() => match msg {
+                    Some(Msg::Stop) | None => break false,
+                    Some(m) => self.on_msg(m),
+                },
+                _ = tick.tick() => {
+                    self.publish_health();
+                    if self.last_input.elapsed() >= idle && self.pending.is_none() {
+                        break true;
+                    }
+                }
+                _ = sleep_until_opt(flush_at), if flush_at.is_some() => self.flush_all(),
+            }
+        };
+        self.drain(&mut rx).await;
+        evicted
+    }
+
+    /// Fuses everything still queued, waits for the outstanding vision jobs, publishes final health.
+    async fn drain(&mut self, rx: &mut mpsc::Receiver<Msg>) {
+        rx.close();
+        while let Ok(m) = rx.try_recv() {
+            if !matches!(m, Msg::Stop) {
+                self.on_msg(m);
+            }
+        }
+        loop {
+            if self.pending.is_some() {
+                let done = recv_vision(&mut self.pending).await;
+                self.on_vision(done);
+                continue;
+            }
+            match self.buffer.pop_first() {
+                Some((_, s)) => self.fuse(s),
+                None => break,
+            }
+        }
+        self.publish_health();
+    }
+
+    fn on_msg(&mut self, msg: Msg) {
+        match msg {
+            Msg::Data(batch) => {
+                for s in batch {
+                    self.on_input(s);
+                }
+            }
+            Msg::Configure { config, reply } => {
+                self.flush_all();
+                self.engine = self.ctx.factory.create(&config);
+                self.pending = None;
+                if let Some(r) = reply {
+                    let _ = r.send(());
+                }
+            }
+            Msg::Reset { reply } => {
+                self.buffer.clear();
+                self.engine.reset();
+                self.pending = None;
+                self.ingest_times.clear();
+                if let Some(r) = reply {
+                    let _ = r.send(());
+                }
+            }
+            Msg::Stop => {}
+        }
+    }
+
+    fn on_input(&mut self, s: Stamped) {
+        self.last_input = Instant::now();
+        if matches!(s.input, Input::Camera(_)) {
+            self.shared.frames_queued.fetch_sub(1, std::sync::atomic::Ordering::AcqRel);
+        }
+        let (t, kind) = (s.input.t_ns(), s.input.kind());
+        match self.buffer.push(t, kind as u8, s) {
+            Ok(()) => {}
+            Err(Refused::Late) => {
+                VehicleStats::add(&self.shared.stats.late, 1);
+                self.ctx.metrics.reorder_dropped.inc();
+            }
+            Err(Refused::Duplicate) => {
+                VehicleStats::add(&self.shared.stats.dropped, 1);
+                self.ctx.metrics.reorder_dropped.inc();
+            }
+        }
+        while let Some((_, s)) = self.buffer.pop_ready() {
+            self.fuse(s);
+        }
+    }
+
+    fn flush_all(&mut self) {
+        while let Some((_, s)) = self.buffer.pop_first() {
+            self.fuse(s);
+        }
+    }
+
+    fn fuse(&mut self, s: Stamped) {
+        match &s.input {
+            Input::Imu(imu) => {
+                self.ingest_times.push_back((imu.t_ns, s.at, s.wall_ns));
+                if self.ingest_times.len() > LATENCY_MEMORY {
+                    self.ingest_times.pop_front();
+                }
+            }
+            Input::Camera(_) => {
+                // Overload: shed the frame before the engine sees it (never IMU).
+                if self.ctx.pool.is_saturated() {
+                    VehicleStats::add(&self.shared.stats.shed, 1);
+                    self.ctx.metrics.vision_shed.inc();
+                    return;
+                }
+            }
+            Input::Gnss(_) => {}
+        }
+        match self.engine.push(s.input.into_event()) {
+            Ok(step) => self.apply(step),
+            Err(e) => {
+                VehicleStats::add(&self.shared.stats.dropped, 1);
+                self.ctx.metrics.engine_errors.inc();
+                debug!(error = %e, "engine refused an input");
+            }
+        }
+    }
+
+    /// Publishes a step's poses and sends its vision job to the pool.
+    fn apply(&mut self, step: EngineStep) {
+        self.publish(step.poses);
+        let Some(work) = step.work else { return };
+        if self.pending.is_some() {
+            // The engine contract is one job at a time; never block on a broken engine.
+            warn!("engine started a second vision job while one was out; dropping it");
+            return;
+        }
+        let (tx, rx) = oneshot::channel();
+        if self.ctx.pool.submit(Box::new(move || {
+            let _ = tx.send(work());
+        })) {
+            self.ctx.metrics.vision_in_flight.set(self.ctx.pool.stats().in_flight as i64);
+            self.pending = Some(rx);
+        }
+    }
+
+    fn on_vision(&mut self, done: Option<VisionResult>) {
+        self.pending = None;
+        match done {
+            Some(result) => {
+                self.ctx.metrics.vision_done.inc();
+                let step = self.engine.finish_frame(result);
+                self.apply(step);
+            }
+            None => {
+                // The job panicked: the engine still waits for it, so start it afresh.
+                self.ctx.metrics.vision_failed.inc();
+                warn!("vision job failed; resetting the vehicle's estimator");
+                self.engine.reset();
+            }
+        }
+    }
+
+    fn publish(&mut self, poses: Vec<pb::PoseEstimate>) {
+        for mut pose in poses {
+            let arrival = self.arrival_of(pose.t_ns);
+            pose.vehicle_id = self.shared.id.to_string();
+            if let Some((_, wall_ns)) = arrival {
+                pose.ingest_wall_ns = wall_ns;
+            }
+            let pose = Arc::new(pose);
+            self.shared.latest_pose.send_replace(Some(Arc::clone(&pose)));
+            let _ = self.ctx.hub.poses.send(pose);
+            self.ctx.metrics.poses.inc();
+            if let Some((at, _)) = arrival {
+                let latency_s = at.elapsed().as_secs_f64();
+                self.ctx.metrics.latency.observe(latency_s);
+                self.window.latency(latency_s);
+            }
+        }
+    }
+
+    /// The arrival of the IMU sample a pose at `t_ns` was made from (the newest one not after it).
+    fn arrival_of(&mut self, t_ns: i64) -> Option<(Instant, i64)> {
+        let mut found = None;
+        while let Some(&(t, at, wall)) = self.ingest_times.front() {
+            if t > t_ns {
+                break;
+            }
+            found = Some((at, wall));
+            self.ingest_times.pop_front();
+        }
+        found
+    }
+
+    fn publish_health(&mut self) {
+        let engine = self.engine.health();
+        let report = Arc::new(self.window.report(&self.shared, &engine, self.buffer.len(), Instant::now()));
+        self.shared.latest_health.send_replace(Some(Arc::clone(&report)));
+        let _ = self.ctx.hub.health.send(report);
+        self.ctx.metrics.health_reports.inc();
+    }
+}
+
+async fn sleep_until_opt(at: Option<tokio::time::Instant>) {
+    match at {
+        Some(at) => tokio::time::sleep_until(at).await,
+        None => std::future::pending().await,
+    }
+}

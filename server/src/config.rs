@@ -1,0 +1,455 @@
+//! Service configuration: defaults, then a TOML file, then `UAVNAV_*` environment variables, then
+//! command-line flags (clap). Unknown TOML keys are rejected with the key's name.
+//!
+//! The shipped `server/uavnavd.toml` lists every key with its default; keep the two in sync (a test
+//! parses that file and compares it with [`Config::default`]).
+
+use std::ffi::OsString;
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+
+use clap::Parser;
+use serde::Deserialize;
+
+/// Errors from loading the configuration.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The config file could not be read.
+    #[error("cannot read config file {path}: {source}")]
+    Read {
+        /// File path.
+        path: PathBuf,
+        /// I/O error.
+        source: std::io::Error,
+    },
+    /// The TOML was malformed or had an unknown key (the message names it).
+    #[error("invalid config file {path}: {message}")]
+    Parse {
+        /// File path.
+        path: PathBuf,
+        /// The parser's message (names the offending key).
+        message: String,
+    },
+    /// An environment variable had an unusable value.
+    #[error("invalid environment variable {name}={value}: {message}")]
+    Env {
+        /// Variable name.
+        name: String,
+        /// Its value.
+        value: String,
+        /// Why it was rejected.
+        message: String,
+    },
+    /// A value is out of its allowed range.
+    #[error("invalid configuration: {0}")]
+    Invalid(String),
+    /// Command-line parsing failed (includes `--help`).
+    #[error("{0}")]
+    Cli(#[from] clap::Error),
+}
+
+/// Zenoh session mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum ZenohMode {
+    /// Peer (default): talks directly to other peers and routers.
+    Peer,
+    /// Client of a router.
+    Client,
+    /// Router: other peers and clients may route through this process.
+    Router,
+}
+
+impl ZenohMode {
+    /// The Zenoh config name of the mode.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ZenohMode::Peer => "peer",
+            ZenohMode::Client => "client",
+            ZenohMode::Router => "router",
+        }
+    }
+}
+
+impl std::str::FromStr for ZenohMode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "peer" => Ok(ZenohMode::Peer),
+            "client" => Ok(ZenohMode::Client),
+            "router" => Ok(ZenohMode::Router),
+            other => Err(format!("unknown zenoh mode '{other}' (expected peer, client or router)")),
+        }
+    }
+}
+
+/// The whole service configuration.
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    /// gRPC endpoint.
+    pub grpc: GrpcConfig,
+    /// HTTP endpoint (metrics and probes).
+    pub http: HttpConfig,
+    /// Embedded Zenoh session.
+    pub zenoh: ZenohConfig,
+    /// Per-vehicle actors.
+    pub vehicles: VehiclesConfig,
+    /// Vision worker pool.
+    pub vision: VisionConfig,
+    /// Health publishing.
+    pub health: HealthConfig,
+    /// Logging.
+    pub log: LogConfig,
+}
+
+/// gRPC endpoint settings.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GrpcConfig {
+    /// Listen address (`0.0.0.0:50051`; port 0 picks a free port).
+    pub addr: SocketAddr,
+    /// Largest accepted (decoded) message, bytes. Sized for 1080p JPEG frames.
+    pub max_message_bytes: usize,
+    /// Ingest acknowledgements buffered per stream before the stream stops reading (flow control).
+    pub ack_buffer: usize,
+}
+
+impl Default for GrpcConfig {
+    fn default() -> Self {
+        Self { addr: SocketAddr::from(([0, 0, 0, 0], 50051)), max_message_bytes: 16 << 20, ack_buffer: 256 }
+    }
+}
+
+/// HTTP endpoint settings.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HttpConfig {
+    /// Listen address for `/metrics`, `/livez`, `/readyz`.
+    pub addr: SocketAddr,
+}
+
+impl Default for HttpConfig {
+    fn default() -> Self {
+        Self { addr: SocketAddr::from(([0, 0, 0, 0], 9464)) }
+    }
+}
+
+/// Embedded Zenoh session settings.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ZenohConfig {
+    /// Run the Zenoh transport at all.
+    pub enabled: bool,
+    /// Session mode.
+    pub mode: ZenohMode,
+    /// Endpoints to listen on.
+    pub listen: Vec<String>,
+    /// Endpoints to connect to.
+    pub connect: Vec<String>,
+    /// A Zenoh JSON5 config file used as the base; `mode`, `listen` and `connect` are applied on top.
+    pub config_file: Option<PathBuf>,
+    /// Multicast scouting (discovering peers on the LAN). Tests turn it off.
+    pub multicast_scouting: bool,
+    /// Instance name in the `uavnav/v1/service/{instance}` liveliness token ("" = host-pid).
+    pub instance: String,
+}
+
+impl Default for ZenohConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            mode: ZenohMode::Peer,
+            listen: vec!["tcp/[::]:7447".to_string()],
+            connect: Vec::new(),
+            config_file: None,
+            multicast_scouting: true,
+            instance: String::new(),
+        }
+    }
+}
+
+/// Per-vehicle actor settings.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VehiclesConfig {
+    /// An actor with no input for this long is evicted, s.
+    pub idle_evict_s: f64,
+    /// Inputs are fused in timestamp order within this window; older data is counted late, ms.
+    pub reorder_window_ms: f64,
+    /// A sample more than this far ahead of the vehicle's latest sample is rejected, s.
+    pub max_future_s: f64,
+    /// Capacity of each actor's sensor queue (IMU/GNSS batches); full = back-pressure, never shed.
+    pub input_queue: usize,
+    /// Camera frames one vehicle may have queued; beyond, new frames are shed (counted).
+    pub camera_queue: usize,
+    /// Most vehicles served at once; more are refused with ResourceExhausted.
+    pub max_vehicles: usize,
+}
+
+impl Default for VehiclesConfig {
+    fn default() -> Self {
+        Self {
+            idle_evict_s: 300.0,
+            reorder_window_ms: 20.0,
+            max_future_s: 10.0,
+            input_queue: 256,
+            camera_queue: 32,
+            max_vehicles: 10_000,
+        }
+    }
+}
+
+/// Vision worker pool settings.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VisionConfig {
+    /// Worker threads (0 = one per core).
+    pub workers: usize,
+    /// Jobs waiting beyond the running ones; when full, frames are shed (counted).
+    pub queue: usize,
+    /// Largest accepted compressed image, bytes.
+    pub max_image_bytes: usize,
+    /// Largest accepted image dimension (width or height), px.
+    pub max_image_side_px: u32,
+}
+
+impl Default for VisionConfig {
+    fn default() -> Self {
+        Self { workers: 0, queue: 16, max_image_bytes: 12 << 20, max_image_side_px: 8192 }
+    }
+}
+
+impl VisionConfig {
+    /// The worker count after resolving 0 to the number of cores.
+    pub fn effective_workers(&self) -> usize {
+        if self.workers > 0 {
+            self.workers
+        } else {
+            std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+        }
+    }
+}
+
+/// Health publishing settings.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HealthConfig {
+    /// Per-vehicle health publication period, ms.
+    pub period_ms: u64,
+}
+
+impl Default for HealthConfig {
+    fn default() -> Self {
+        Self { period_ms: 1000 }
+    }
+}
+
+/// Logging settings.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LogConfig {
+    /// JSON lines instead of human-readable logs.
+    pub json: bool,
+    /// `tracing` filter directive (overridden by `RUST_LOG`).
+    pub filter: String,
+}
+
+impl Default for LogConfig {
+    fn default() -> Self {
+        Self { json: false, filter: "info".to_string() }
+    }
+}
+
+/// Command-line flags. Every flag overrides the file and the environment.
+#[derive(Debug, Clone, Default, Parser)]
+#[command(name = "uavnavd", version, about = "uavnav fleet estimation service (gRPC + Zenoh)")]
+pub struct Cli {
+    /// TOML config file (also `UAVNAV_CONFIG`).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// gRPC listen address [default: 0.0.0.0:50051].
+    #[arg(long, value_name = "ADDR")]
+    pub grpc_addr: Option<SocketAddr>,
+    /// HTTP listen address for /metrics, /livez, /readyz [default: 0.0.0.0:9464].
+    #[arg(long, value_name = "ADDR")]
+    pub http_addr: Option<SocketAddr>,
+    /// Zenoh session mode [default: peer].
+    #[arg(long, value_enum, value_name = "MODE")]
+    pub zenoh_mode: Option<ZenohMode>,
+    /// Zenoh endpoint to listen on (repeatable) [default: tcp/[::]:7447].
+    #[arg(long, value_name = "ENDPOINT")]
+    pub zenoh_listen: Vec<String>,
+    /// Zenoh endpoint to connect to (repeatable).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub zenoh_connect: Vec<String>,
+    /// Zenoh JSON5 config file used as the session's base configuration.
+    #[arg(long, value_name = "FILE")]
+    pub zenoh_config: Option<PathBuf>,
+    /// Disable the Zenoh transport.
+    #[arg(long)]
+    pub no_zenoh: bool,
+    /// JSON log lines.
+    #[arg(long)]
+    pub log_json: bool,
+}
+
+/// Environment variables read by [`Config::load`], with the key each overrides.
+pub const ENV_VARS: &[(&str, &str)] = &[
+    ("UAVNAV_CONFIG", "(config file path)"),
+    ("UAVNAV_GRPC_ADDR", "grpc.addr"),
+    ("UAVNAV_HTTP_ADDR", "http.addr"),
+    ("UAVNAV_ZENOH_ENABLED", "zenoh.enabled"),
+    ("UAVNAV_ZENOH_MODE", "zenoh.mode"),
+    ("UAVNAV_ZENOH_LISTEN", "zenoh.listen (comma-separated)"),
+    ("UAVNAV_ZENOH_CONNECT", "zenoh.connect (comma-separated)"),
+    ("UAVNAV_ZENOH_CONFIG", "zenoh.config_file"),
+    ("UAVNAV_ZENOH_INSTANCE", "zenoh.instance"),
+    ("UAVNAV_LOG_JSON", "log.json"),
+    ("UAVNAV_LOG", "log.filter"),
+];
+
+impl Config {
+    /// Parses a TOML document (unknown keys are errors naming the key).
+    pub fn from_toml(text: &str, path: &Path) -> Result<Self, ConfigError> {
+        toml::from_str(text).map_err(|e| ConfigError::Parse { path: path.to_path_buf(), message: e.to_string() })
+    }
+
+    /// Reads and parses a TOML file.
+    pub fn from_file(path: &Path) -> Result<Self, ConfigError> {
+        let text =
+            std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.to_path_buf(), source })?;
+        Self::from_toml(&text, path)
+    }
+
+    /// Defaults → file (`--config` or `UAVNAV_CONFIG`) → environment → flags.
+    ///
+    /// `env` looks a variable up (pass `|k| std::env::var(k).ok()` in production) so tests need not
+    /// touch the process environment.
+    pub fn load<I, T>(args: I, env: impl Fn(&str) -> Option<String>) -> Result<Self, ConfigError>
+    where
+        I: IntoIterator<Item = T>,
+        T: Into<OsString> + Clone,
+    {
+        let cli = Cli::try_parse_from(args)?;
+        let file = cli.config.clone().or_else(|| env("UAVNAV_CONFIG").map(PathBuf::from));
+        let mut cfg = match file {
+            Some(path) => Self::from_file(&path)?,
+            None => Self::default(),
+        };
+        cfg.apply_env(&env)?;
+        cfg.apply_cli(&cli);
+        cfg.check()?;
+        Ok(cfg)
+    }
+
+    /// Applies the `UAVNAV_*` variables listed in [`ENV_VARS`].
+    pub fn apply_env(&mut self, env: &impl Fn(&str) -> Option<String>) -> Result<(), ConfigError> {
+        fn parse<T: std::str::FromStr>(name: &str, value: String) -> Result<T, ConfigError>
+        where
+            T::Err: std::fmt::Display,
+        {
+            value.parse::<T>().map_err(|e| ConfigError::Env { name: name.into(), value, message: e.to_string() })
+        }
+        let list = |v: String| v.split(',').map(|s| s.trim().to_string()).filter(|s| !s.is_empty()).collect();
+        if let Some(v) = env("UAVNAV_GRPC_ADDR") {
+            self.grpc.addr = parse("UAVNAV_GRPC_ADDR", v)?;
+        }
+        if let Some(v) = env("UAVNAV_HTTP_ADDR") {
+            self.http.addr = parse("UAVNAV_HTTP_ADDR", v)?;
+        }
+        if let Some(v) = env("UAVNAV_ZENOH_ENABLED") {
+            self.zenoh.enabled = parse("UAVNAV_ZENOH_ENABLED", v)?;
+        }
+        if let Some(v) = env("UAVNAV_ZENOH_MODE") {
+            self.zenoh.mode = parse("UAVNAV_ZENOH_MODE", v)?;
+        }
+        if let Some(v) = env("UAVNAV_ZENOH_LISTEN") {
+            self.zenoh.listen = list(v);
+        }
+        if let Some(v) = env("UAVNAV_ZENOH_CONNECT") {
+            self.zenoh.connect = list(v);
+        }
+        if let Some(v) = env("UAVNAV_ZENOH_CONFIG") {
+            self.zenoh.config_file = Some(PathBuf::from(v));
+        }
+        if let Some(v) = env("UAVNAV_ZENOH_INSTANCE") {
+            self.zenoh.instance = v;
+        }
+        if let Some(v) = env("UAVNAV_LOG_JSON") {
+            self.log.json = parse("UAVNAV_LOG_JSON", v)?;
+        }
+        if let Some(v) = env("UAVNAV_LOG") {
+            self.log.filter = v;
+        }
+        Ok(())
+    }
+
+    /// Applies the flags that were given.
+    pub fn apply_cli(&mut self, cli: &Cli) {
+        if let Some(a) = cli.grpc_addr {
+            self.grpc.addr = a;
+        }
+        if let Some(a) = cli.http_addr {
+            self.http.addr = a;
+        }
+        if let Some(m) = cli.zenoh_mode {
+            self.zenoh.mode = m;
+        }
+        if !cli.zenoh_listen.is_empty() {
+            self.zenoh.listen = cli.zenoh_listen.clone();
+        }
+        if !cli.zenoh_connect.is_empty() {
+            self.zenoh.connect = cli.zenoh_connect.clone();
+        }
+        if let Some(f) = &cli.zenoh_config {
+            self.zenoh.config_file = Some(f.clone());
+        }
+        if cli.no_zenoh {
+            self.zenoh.enabled = false;
+        }
+        if cli.log_json {
+            self.log.json = true;
+        }
+    }
+
+    /// Rejects values that cannot work.
+    pub fn check(&self) -> Result<(), ConfigError> {
+        let bad = |m: &str| Err(ConfigError::Invalid(m.to_string()));
+        if self.grpc.max_message_bytes < 8 << 20 {
+            return bad("grpc.max_message_bytes must be at least 8 MiB (1080p JPEG frames)");
+        }
+        if self.grpc.ack_buffer == 0 || self.vehicles.input_queue == 0 || self.vehicles.camera_queue == 0 {
+            return bad("grpc.ack_buffer, vehicles.input_queue and vehicles.camera_queue must be > 0");
+        }
+        let v = &self.vehicles;
+        if !(v.reorder_window_ms >= 0.0 && v.reorder_window_ms <= 10_000.0) {
+            return bad("vehicles.reorder_window_ms must be in [0, 10000]");
+        }
+        if !(v.idle_evict_s > 0.0 && v.max_future_s > 0.0) || v.max_vehicles == 0 {
+            return bad("vehicles.idle_evict_s, vehicles.max_future_s and vehicles.max_vehicles must be > 0");
+        }
+        if self.health.period_ms == 0 {
+            return bad("health.period_ms must be > 0");
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_file_equals_defaults() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("uavnavd.toml");
+        let cfg = Config::from_file(&path).unwrap();
+        assert_eq!(cfg, Config::default());
+    }
+
+    #[test]
+    fn unknown_key_is_named() {
+        let err = Config::from_toml("[grpc]\nadress = \"1.2.3.4:5\"\n", Path::new("x.toml")).unwrap_err();
+        assert!(err.to_string().contains("adress"), "{err}");
+    }
+}

@@ -1,0 +1,90 @@
+//! The seam between the service and the estimation code: one [`Engine`] per vehicle.
+//!
+//! Actors only talk to this trait, so the fusion implementation behind it is swapped in one file.
+//! The product implementation ([`crate::runner_engine`]) wraps `uavnav_runner::VehicleRunner`
+//! (vision front end + estimator); tests may plug a scripted engine through [`EngineFactory`].
+
+use std::any::Any;
+use std::sync::Arc;
+
+use uavnav_core::{SensorEvent, VehicleConfig};
+use uavnav_proto::v1 as pb;
+
+/// An error reported by an engine for one input; the actor counts it and goes on.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct EngineError(pub String);
+
+/// What an engine says about itself; the actor adds the input statistics to make the health report.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct EngineHealth {
+    /// Operating mode.
+    pub mode: pb::EstimatorMode,
+    /// Sensor time of the newest estimate, ns (0 = none yet).
+    pub t_ns: i64,
+    /// Latest innovation test ratios.
+    pub innovation: pb::InnovationRatios,
+    /// Latest vision quality (None without camera or before the first frame).
+    pub vision: Option<pb::VisionQuality>,
+    /// GNSS measurements rejected by the innovation gate so far.
+    pub gnss_gate_rejections: u64,
+    /// Vision measurements rejected by the innovation gate so far.
+    pub vision_gate_rejections: u64,
+    /// Inputs the engine refused or dropped (estimator validation, behind its horizon).
+    pub engine_dropped: u64,
+}
+
+/// The result of a vision job, handed back to the engine that created it.
+pub type VisionResult = Box<dyn Any + Send>;
+
+/// CPU work for one camera frame, run on the vision pool.
+pub type VisionWork = Box<dyn FnOnce() -> VisionResult + Send>;
+
+/// What one call produced: poses (wire messages without `vehicle_id` / `ingest_wall_ns`, which the
+/// actor fills in) and possibly a vision job to run on the pool.
+#[derive(Default)]
+pub struct EngineStep {
+    /// Poses in time order.
+    pub poses: Vec<pb::PoseEstimate>,
+    /// Vision work to run; its result goes back through [`Engine::finish_frame`].
+    pub work: Option<VisionWork>,
+}
+
+impl std::fmt::Debug for EngineStep {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EngineStep").field("poses", &self.poses.len()).field("work", &self.work.is_some()).finish()
+    }
+}
+
+/// One vehicle's estimator, driven by its actor in timestamp order (ties: IMU, GNSS, camera).
+/// Deterministic. At most one vision job is out at a time; the engine holds later inputs itself.
+pub trait Engine: Send + 'static {
+    /// Fuses one input.
+    fn push(&mut self, event: SensorEvent) -> Result<EngineStep, EngineError>;
+    /// Hands back the result of the vision job the engine produced last.
+    fn finish_frame(&mut self, done: VisionResult) -> EngineStep;
+    /// Current self-assessment.
+    fn health(&self) -> EngineHealth;
+    /// Forgets all state (the configuration is kept).
+    fn reset(&mut self);
+}
+
+/// Builds engines for new vehicles and for reconfigured ones.
+pub trait EngineFactory: Send + Sync + 'static {
+    /// A fresh engine for a vehicle with this configuration.
+    fn create(&self, config: &VehicleConfig) -> Box<dyn Engine>;
+}
+
+impl std::fmt::Debug for dyn EngineFactory {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("EngineFactory")
+    }
+}
+
+/// A shared factory.
+pub type SharedFactory = Arc<dyn EngineFactory>;
+
+/// The product factory (the estimator runner with default parameters).
+pub fn default_factory() -> SharedFactory {
+    Arc::new(crate::runner_engine::RunnerFactory::default())
+}

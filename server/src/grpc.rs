@@ -1,0 +1,275 @@
+//! The tonic `uavnav.v1.UavNav` service: `Ingest` (bidirectional, one ack per envelope, flow
+//! control through a bounded ack queue), `WatchPoses` / `WatchHealth` (server streams with
+//! selection and decimation), `GetPose`, `ListVehicles`, `ConfigureVehicle`, `ResetVehicle`.
+//!
+//! Stream-level failures get precise statuses: a malformed envelope ends `Ingest` with
+//! INVALID_ARGUMENT and an oversize one with RESOURCE_EXHAUSTED (tonic reports them as INTERNAL and
+//! OUT_OF_RANGE; [`remap_transport_status`] fixes that for unary calls too).
+
+use std::collections::HashMap;
+use std::pin::Pin;
+use std::sync::Arc;
+
+use futures::{Stream, StreamExt};
+use tokio::sync::{broadcast, mpsc, watch};
+use tokio_stream::wrappers::ReceiverStream;
+use tonic::{Request, Response, Status, Streaming};
+use uavnav_proto::v1 as pb;
+use uavnav_proto::v1::uav_nav_server::UavNav;
+
+use crate::ingest::{Ingestor, Payload};
+use crate::metrics::{Kind, Outcome, Transport};
+use crate::validate;
+
+/// Outgoing message queue of one watch stream.
+const WATCH_QUEUE: usize = 1024;
+
+/// The service implementation.
+#[derive(Debug, Clone)]
+pub struct UavNavService {
+    ingestor: Ingestor,
+    ack_buffer: usize,
+}
+
+impl UavNavService {
+    /// A service over `ingestor`.
+    pub fn new(ingestor: Ingestor, ack_buffer: usize) -> Self {
+        Self { ingestor, ack_buffer }
+    }
+
+    fn stopping(&self) -> watch::Receiver<bool> {
+        self.ingestor.registry().ctx().hub.stopping.clone()
+    }
+}
+
+type BoxStream<T> = Pin<Box<dyn Stream<Item = Result<T, Status>> + Send + 'static>>;
+
+/// Maps tonic's decode failures to the statuses our contract promises.
+pub fn remap_decode_status(s: Status) -> Status {
+    match s.code() {
+        tonic::Code::Internal if s.message().contains("decode") => {
+            Status::invalid_argument(format!("malformed protobuf message: {}", s.message()))
+        }
+        tonic::Code::OutOfRange if s.message().contains("too large") => {
+            Status::resource_exhausted(format!("message too large: {}", s.message()))
+        }
+        _ => s,
+    }
+}
+
+/// Rewrites a trailers-only error response from tonic's request decoding (INTERNAL for malformed
+/// protobuf, OUT_OF_RANGE for oversize) into INVALID_ARGUMENT / RESOURCE_EXHAUSTED. Used as an axum
+/// `map_response` layer around the whole gRPC router.
+pub async fn remap_transport_status<B>(mut resp: tonic::codegen::http::Response<B>) -> tonic::codegen::http::Response<B> {
+    let headers = resp.headers_mut();
+    let code = headers.get("grpc-status").and_then(|v| v.to_str().ok()).map(str::to_owned);
+    let msg = headers.get("grpc-message").and_then(|v| v.to_str().ok()).unwrap_or("").to_ascii_lowercase();
+    let new = match code.as_deref() {
+        Some("13") if msg.contains("decode") => Some("3"),
+        Some("11") if msg.contains("too%20large") || msg.contains("too large") => Some("8"),
+        _ => None,
+    };
+    if let Some(new) = new {
+        headers.insert("grpc-status", tonic::codegen::http::HeaderValue::from_static(new));
+    }
+    resp
+}
+
+fn envelope_kind(e: &pb::SensorEnvelope) -> Option<Payload<'_>> {
+    use pb::sensor_envelope::Payload as P;
+    Some(match e.payload.as_ref()? {
+        P::Imu(b) => Payload::Imu(b),
+        P::Gnss(g) => Payload::Gnss(g),
+        P::Camera(c) => Payload::Camera(c),
+        P::Config(c) => Payload::Config(c),
+    })
+}
+
+async fn ack_envelope(ingestor: &Ingestor, e: pb::SensorEnvelope) -> pb::IngestAck {
+    let verdict = match envelope_kind(&e) {
+        Some(p) => ingestor.submit(Transport::Grpc, &e.vehicle_id, p).await,
+        None => {
+            ingestor.registry().ctx().metrics.input(Transport::Grpc, Kind::Malformed, Outcome::Invalid, 1);
+            crate::ingest::Verdict {
+                status: pb::IngestStatus::InvalidArgument,
+                reason: "payload: required (imu, gnss, camera or config)".into(),
+            }
+        }
+    };
+    pb::IngestAck { sequence: e.sequence, vehicle_id: e.vehicle_id, status: verdict.status as i32, reason: verdict.reason }
+}
+
+/// Which vehicles a watch selects.
+#[derive(Debug, Clone)]
+struct Selector {
+    ids: Vec<String>,
+    prefix: String,
+    all: bool,
+    decimation: u32,
+}
+
+impl Selector {
+    fn from_request(r: &pb::WatchRequest) -> Result<Self, Status> {
+        if r.vehicle_ids.is_empty() && r.id_prefix.is_empty() && !r.all {
+            return Err(Status::invalid_argument("vehicle_ids, id_prefix or all: select at least one vehicle"));
+        }
+        for id in &r.vehicle_ids {
+            validate::vehicle_id(id).map_err(|e| Status::invalid_argument(format!("vehicle_ids: {}", e.reason)))?;
+        }
+        Ok(Self { ids: r.vehicle_ids.clone(), prefix: r.id_prefix.clone(), all: r.all, decimation: r.decimation.max(1) })
+    }
+
+    fn matches(&self, id: &str) -> bool {
+        self.all || (!self.prefix.is_empty() && id.starts_with(&self.prefix)) || self.ids.iter().any(|v| v == id)
+    }
+}
+
+/// Forwards the selected, decimated messages of a broadcast channel to a watch stream until the
+/// client leaves or the service stops.
+fn watch_stream<T, F>(
+    mut rx: broadcast::Receiver<Arc<T>>,
+    sel: Selector,
+    mut stopping: watch::Receiver<bool>,
+    id_of: F,
+) -> BoxStream<T>
+where
+    T: Clone + Send + Sync + 'static,
+    F: Fn(&T) -> &str + Send + 'static,
+{
+    let (tx, out) = mpsc::channel(WATCH_QUEUE);
+    tokio::spawn(async move {
+        let mut seen: HashMap<String, u64> = HashMap::new();
+        loop {
+            let item = tokio::select! {
+                r = rx.recv() => r,
+                _ = stopping.wait_for(|s| *s) => break,
+                _ = tx.closed() => break,
+            };
+            match item {
+                Ok(m) => {
+                    let id = id_of(&m);
+                    if !sel.matches(id) {
+                        continue;
+                    }
+                    let n = seen.entry(id.to_owned()).or_insert(0);
+                    *n += 1;
+                    if (*n - 1) % sel.decimation as u64 != 0 {
+                        continue;
+                    }
+                    if tx.send(Ok((*m).clone())).await.is_err() {
+                        break;
+                    }
+                }
+                // A slow watcher skips what it missed rather than slowing estimation down.
+                Err(broadcast::error::RecvError::Lagged(_)) => continue,
+                Err(broadcast::error::RecvError::Closed) => break,
+            }
+        }
+    });
+    Box::pin(ReceiverStream::new(out))
+}
+
+fn unknown_vehicle(id: &str) -> Status {
+    Status::not_found(format!("vehicle_id: {id:?} is not known to this service"))
+}
+
+#[tonic::async_trait]
+impl UavNav for UavNavService {
+    type IngestStream = BoxStream<pb::IngestAck>;
+    type WatchPosesStream = BoxStream<pb::PoseEstimate>;
+    type WatchHealthStream = BoxStream<pb::VehicleHealth>;
+
+    async fn ingest(&self, request: Request<Streaming<pb::SensorEnvelope>>) -> Result<Response<Self::IngestStream>, Status> {
+        let mut inbound = request.into_inner();
+        // Bounded: when the client stops reading acks we stop reading envelopes (HTTP/2 flow
+        // control then pushes back on the sender).
+        let (tx, rx) = mpsc::channel(self.ack_buffer);
+        let ingestor = self.ingestor.clone();
+        let mut stopping = self.stopping();
+        tokio::spawn(async move {
+            loop {
+                let next = tokio::select! {
+                    biased;
+                    _ = stopping.wait_for(|s| *s) => break,
+                    m = inbound.next() => m,
+                };
+                match next {
+                    None => break,
+                    Some(Err(status)) => {
+                        let status = remap_decode_status(status);
+                        if status.code() == tonic::Code::InvalidArgument {
+                            ingestor.registry().ctx().metrics.input(Transport::Grpc, Kind::Malformed, Outcome::Invalid, 1);
+                        }
+                        let _ = tx.send(Err(status)).await;
+                        break;
+                    }
+                    Some(Ok(envelope)) => {
+                        let ack = ack_envelope(&ingestor, envelope).await;
+                        if tx.send(Ok(ack)).await.is_err() {
+                            break;
+                        }
+                    }
+                }
+            }
+        });
+        Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
+    }
+
+    async fn watch_poses(&self, request: Request<pb::WatchRequest>) -> Result<Response<Self::WatchPosesStream>, Status> {
+        let sel = Selector::from_request(request.get_ref())?;
+        let rx = self.ingestor.registry().ctx().hub.poses.subscribe();
+        Ok(Response::new(watch_stream(rx, sel, self.stopping(), |p: &pb::PoseEstimate| &p.vehicle_id)))
+    }
+
+    async fn watch_health(&self, request: Request<pb::WatchRequest>) -> Result<Response<Self::WatchHealthStream>, Status> {
+        let sel = Selector::from_request(request.get_ref())?;
+        let rx = self.ingestor.registry().ctx().hub.health.subscribe();
+        Ok(Response::new(watch_stream(rx, sel, self.stopping(), |h: &pb::VehicleHealth| &h.vehicle_id)))
+    }
+
+    async fn get_pose(&self, request: Request<pb::GetPoseRequest>) -> Result<Response<pb::PoseEstimate>, Status> {
+        let id = &request.get_ref().vehicle_id;
+        validate::vehicle_id(id).map_err(|e| e.to_status())?;
+        let h = self.ingestor.registry().get(id).ok_or_else(|| unknown_vehicle(id))?;
+        let pose = h.shared.pose().ok_or_else(|| Status::not_found(format!("vehicle_id: {id:?} has no pose yet")))?;
+        Ok(Response::new((*pose).clone()))
+    }
+
+    async fn list_vehicles(&self, request: Request<pb::ListVehiclesRequest>) -> Result<Response<pb::ListVehiclesResponse>, Status> {
+        let vehicles = self.ingestor.registry().list(&request.get_ref().id_prefix).iter().map(summary_of).collect();
+        Ok(Response::new(pb::ListVehiclesResponse { vehicles }))
+    }
+
+    async fn configure_vehicle(
+        &self,
+        request: Request<pb::ConfigureVehicleRequest>,
+    ) -> Result<Response<pb::ConfigureVehicleResponse>, Status> {
+        let r = request.get_ref();
+        validate::vehicle_id(&r.vehicle_id).map_err(|e| e.to_status())?;
+        let config = r.config.as_ref().ok_or_else(|| Status::invalid_argument("config: required"))?;
+        let created = self.ingestor.configure(&r.vehicle_id, config, true).await.map_err(|e| e.to_status())?;
+        Ok(Response::new(pb::ConfigureVehicleResponse { created }))
+    }
+
+    async fn reset_vehicle(&self, request: Request<pb::ResetVehicleRequest>) -> Result<Response<pb::ResetVehicleResponse>, Status> {
+        let id = &request.get_ref().vehicle_id;
+        match self.ingestor.reset(id).await.map_err(|e| e.to_status())? {
+            Some(()) => Ok(Response::new(pb::ResetVehicleResponse {})),
+            None => Err(unknown_vehicle(id)),
+        }
+    }
+}
+
+/// The list entry of one vehicle.
+pub fn summary_of(h: &crate::actor::VehicleHandle) -> pb::VehicleSummary {
+    let s = &h.shared;
+    let pose = s.pose();
+    let mode = s.health().map(|x| x.mode).or_else(|| pose.as_ref().map(|p| p.mode)).unwrap_or(pb::EstimatorMode::Initialising as i32);
+    pb::VehicleSummary {
+        vehicle_id: s.id.to_string(),
+        mode,
+        last_t_ns: pose.map(|p| p.t_ns).unwrap_or(0),
+        last_input_wall_ns: s.last_input_wall_ns.load(std::sync::atomic::Ordering::Relaxed),
+        configured: s.configured.load(std::sync::atomic::Ordering::Relaxed),
+    }
+}

@@ -1,0 +1,121 @@
+//! Per-vehicle health reports, made by each actor at a fixed rate: mode, input rates, counters,
+//! vision quality, innovation test ratios and ingest-to-pose latency over the last period.
+
+use std::time::Instant;
+
+use uavnav_proto::v1 as pb;
+
+use crate::engine::EngineHealth;
+use crate::vehicle::{VehicleShared, VehicleStats, wall_ns};
+
+/// Latency samples kept per period (a uniform subsample beyond it keeps memory flat).
+const MAX_LATENCY_SAMPLES: usize = 4096;
+
+/// What one actor remembers between two health reports.
+#[derive(Debug)]
+pub struct HealthWindow {
+    since: Instant,
+    counts_at_start: [u64; 3],
+    latencies_s: Vec<f64>,
+    latency_seen: u64,
+    /// Vision quality is kept from report to report (a camera at 1 Hz must not flicker).
+    last_vision: Option<pb::VisionQuality>,
+}
+
+impl HealthWindow {
+    /// A window starting now.
+    pub fn new(now: Instant) -> Self {
+        Self { since: now, counts_at_start: [0; 3], latencies_s: Vec::new(), latency_seen: 0, last_vision: None }
+    }
+
+    /// Records one ingest-to-pose latency.
+    pub fn latency(&mut self, latency_s: f64) {
+        self.latency_seen += 1;
+        if self.latencies_s.len() < MAX_LATENCY_SAMPLES {
+            self.latencies_s.push(latency_s);
+        } else {
+            // Deterministic decimation: overwrite slots round-robin (no RNG on the hot path).
+            let i = (self.latency_seen as usize) % MAX_LATENCY_SAMPLES;
+            self.latencies_s[i] = latency_s;
+        }
+    }
+
+    /// Builds the report for the period ending `now` and starts the next period.
+    pub fn report(
+        &mut self,
+        shared: &VehicleShared,
+        engine: &EngineHealth,
+        reorder_depth: usize,
+        now: Instant,
+    ) -> pb::VehicleHealth {
+        let st = &shared.stats;
+        let counts = [VehicleStats::get(&st.imu), VehicleStats::get(&st.gnss), VehicleStats::get(&st.camera)];
+        let dt_s = now.duration_since(self.since).as_secs_f64().max(1e-6);
+        let rate = |i: usize| counts[i].saturating_sub(self.counts_at_start[i]) as f64 / dt_s;
+        let input_rates = pb::SensorRates { imu_hz: rate(0), gnss_hz: rate(1), camera_hz: rate(2) };
+        if engine.vision.is_some() {
+            self.last_vision = engine.vision;
+        }
+        let report = pb::VehicleHealth {
+            vehicle_id: shared.id.to_string(),
+            t_ns: engine.t_ns,
+            wall_ns: wall_ns(),
+            mode: engine.mode as i32,
+            input_rates: Some(input_rates),
+            latency: Some(latency_stats(&mut self.latencies_s)),
+            innovation_ratios: Some(engine.innovation),
+            counters: Some(pb::InputCounters {
+                accepted: st.accepted(),
+                rejected: VehicleStats::get(&st.rejected),
+                late: VehicleStats::get(&st.late),
+                shed: VehicleStats::get(&st.shed),
+                dropped: VehicleStats::get(&st.dropped),
+                gnss_gate_rejections: engine.gnss_gate_rejections,
+                vision_gate_rejections: engine.vision_gate_rejections,
+            }),
+            vision: if shared.camera().is_some() { self.last_vision } else { None },
+            reorder_depth: reorder_depth.min(u32::MAX as usize) as u32,
+        };
+        self.since = now;
+        self.counts_at_start = counts;
+        self.latencies_s.clear();
+        report
+    }
+}
+
+/// p50 / p99 / max of the samples (all zero when empty).
+fn latency_stats(samples: &mut [f64]) -> pb::LatencyStats {
+    if samples.is_empty() {
+        return pb::LatencyStats::default();
+    }
+    samples.sort_by(f64::total_cmp);
+    let at = |q: f64| samples[((samples.len() - 1) as f64 * q).round() as usize];
+    pb::LatencyStats { p50_s: at(0.5), p99_s: at(0.99), max_s: samples[samples.len() - 1] }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn latency_percentiles() {
+        let mut v: Vec<f64> = (1..=100).map(|i| i as f64 / 1000.0).collect();
+        let s = latency_stats(&mut v);
+        assert!((s.p50_s - 0.050).abs() < 0.0015);
+        assert!((s.p99_s - 0.099).abs() < 0.0015);
+        assert_eq!(s.max_s, 0.1);
+    }
+
+    #[test]
+    fn rates_over_the_period() {
+        let shared = VehicleShared::new("v".into());
+        let t0 = Instant::now();
+        let mut w = HealthWindow::new(t0);
+        VehicleStats::add(&shared.stats.imu, 200);
+        VehicleStats::add(&shared.stats.gnss, 5);
+        let r = w.report(&shared, &EngineHealth::default(), 0, t0 + std::time::Duration::from_secs(1));
+        let rates = r.input_rates.unwrap();
+        assert!((rates.imu_hz - 200.0).abs() < 1e-9 && (rates.gnss_hz - 5.0).abs() < 1e-9);
+        assert_eq!(r.counters.unwrap().accepted, 205);
+    }
+}

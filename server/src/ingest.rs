@@ -1,0 +1,271 @@
+//! The transport-neutral ingest path: gRPC and Zenoh both hand their decoded messages to
+//! [`Ingestor`], which validates them, runs the vehicle's time gate, applies the overload policy
+//! and routes them to the vehicle's actor. Every outcome is counted (vehicle health + metrics).
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use uavnav_proto::v1 as pb;
+
+use crate::actor::{Input, Msg, SendError, Stamped, VehicleHandle};
+use crate::metrics::{Kind, Outcome, Transport};
+use crate::registry::{Registry, RegistryError};
+use crate::validate::{self, ImageLimits, Rejection};
+use crate::vehicle::{GateRefusal, InputKind, VehicleStats, wall_ns};
+
+/// One decoded input message.
+#[derive(Debug, Clone, Copy)]
+pub enum Payload<'a> {
+    /// IMU batch.
+    Imu(&'a pb::ImuBatch),
+    /// GNSS fix.
+    Gnss(&'a pb::GnssFix),
+    /// Camera frame.
+    Camera(&'a pb::CameraFrame),
+    /// Vehicle configuration.
+    Config(&'a pb::VehicleConfig),
+}
+
+impl Payload<'_> {
+    fn kind(&self) -> Kind {
+        match self {
+            Payload::Imu(_) => Kind::Imu,
+            Payload::Gnss(_) => Kind::Gnss,
+            Payload::Camera(_) => Kind::Camera,
+            Payload::Config(_) => Kind::Config,
+        }
+    }
+}
+
+/// The outcome of one message: an ack status and a reason.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Verdict {
+    /// Status.
+    pub status: pb::IngestStatus,
+    /// Reason (empty when accepted without remark).
+    pub reason: String,
+}
+
+impl Verdict {
+    fn accepted(reason: String) -> Self {
+        Self { status: pb::IngestStatus::Accepted, reason }
+    }
+}
+
+impl From<Rejection> for Verdict {
+    fn from(r: Rejection) -> Self {
+        Self { status: r.status, reason: r.reason }
+    }
+}
+
+/// The ingest front door shared by every transport.
+#[derive(Debug, Clone)]
+pub struct Ingestor {
+    registry: Arc<Registry>,
+    limits: ImageLimits,
+    max_message_bytes: usize,
+}
+
+impl Ingestor {
+    /// An ingestor over `registry`.
+    pub fn new(registry: Arc<Registry>, limits: ImageLimits, max_message_bytes: usize) -> Self {
+        Self { registry, limits, max_message_bytes }
+    }
+
+    /// Largest accepted encoded message, bytes.
+    pub fn max_message_bytes(&self) -> usize {
+        self.max_message_bytes
+    }
+
+    /// The registry.
+    pub fn registry(&self) -> &Arc<Registry> {
+        &self.registry
+    }
+
+    /// Validates and routes one message for vehicle `id`.
+    pub async fn submit(&self, transport: Transport, id: &str, payload: Payload<'_>) -> Verdict {
+        let kind = payload.kind();
+        let verdict = match self.route(transport, id, payload).await {
+            Ok(v) => v,
+            Err(r) => {
+                if let Some(h) = self.registry.get(id) {
+                    let st = &h.shared.stats;
+                    let counter = match r.status {
+                        pb::IngestStatus::Late | pb::IngestStatus::OutOfRange => &st.late,
+                        pb::IngestStatus::ResourceExhausted => &st.shed,
+                        _ => &st.rejected,
+                    };
+                    VehicleStats::add(counter, 1);
+                }
+                Verdict::from(r)
+            }
+        };
+        let outcome = match verdict.status {
+            pb::IngestStatus::Accepted => None, // counted per sample in `route`
+            pb::IngestStatus::InvalidArgument => Some(Outcome::Invalid),
+            pb::IngestStatus::FailedPrecondition => Some(Outcome::Precondition),
+            pb::IngestStatus::Late => Some(Outcome::Late),
+            pb::IngestStatus::OutOfRange => Some(Outcome::Future),
+            pb::IngestStatus::ResourceExhausted => Some(Outcome::Exhausted),
+            pb::IngestStatus::Unspecified => Some(Outcome::Invalid),
+        };
+        if let Some(o) = outcome {
+            self.registry.ctx().metrics.input(transport, kind, o, 1);
+        }
+        verdict
+    }
+
+    async fn route(&self, transport: Transport, id: &str, payload: Payload<'_>) -> Result<Verdict, Rejection> {
+        validate::vehicle_id(id)?;
+        match payload {
+            Payload::Imu(b) => self.imu(transport, id, b).await,
+            Payload::Gnss(g) => self.gnss(transport, id, g).await,
+            Payload::Camera(c) => self.camera(transport, id, c).await,
+            Payload::Config(c) => self.configure(id, c, false).await.map(|_| Verdict::accepted(String::new())),
+        }
+    }
+
+    fn vehicle(&self, id: &str) -> Result<VehicleHandle, Rejection> {
+        self.registry.get_or_create(id, None).map(|(h, _)| h).map_err(registry_rejection)
+    }
+
+    async fn imu(&self, transport: Transport, id: &str, b: &pb::ImuBatch) -> Result<Verdict, Rejection> {
+        let samples = validate::imu_batch(b)?;
+        let h = self.vehicle(id)?;
+        let ctx = self.registry.ctx();
+        let (at, wall) = (Instant::now(), wall_ns());
+        let (n, mut batch, mut late, mut future) = (samples.len(), Vec::with_capacity(samples.len()), 0, 0);
+        let mut first_refusal = None;
+        for (i, s) in samples.into_iter().enumerate() {
+            let field = format!("imu.samples[{i}]");
+            match h.shared.admit(InputKind::Imu, s.t_ns, ctx.window_ns(), ctx.max_future_ns(), &field) {
+                Ok(()) => batch.push(Stamped { input: Input::Imu(s), wall_ns: wall, at }),
+                Err(r) => {
+                    match &r {
+                        GateRefusal::Late(_) => late += 1,
+                        GateRefusal::Future(_) => future += 1,
+                    }
+                    first_refusal.get_or_insert(r);
+                }
+            }
+        }
+        let accepted = batch.len() as u64;
+        if accepted == 0 {
+            // Counted once, as a refused message, by `submit`.
+            return Err(gate_rejection(first_refusal));
+        }
+        VehicleStats::add(&h.shared.stats.late, late + future);
+        ctx.metrics.input(transport, Kind::Imu, Outcome::Late, late);
+        ctx.metrics.input(transport, Kind::Imu, Outcome::Future, future);
+        self.send(&h, id, Msg::Data(batch)).await?;
+        VehicleStats::add(&h.shared.stats.imu, accepted);
+        ctx.metrics.input(transport, Kind::Imu, Outcome::Accepted, accepted);
+        h.shared.last_input_wall_ns.store(wall, std::sync::atomic::Ordering::Relaxed);
+        let remark = match first_refusal {
+            Some(r) => format!("{} of {n} samples dropped: {}", n as u64 - accepted, refusal_text(&r)),
+            None => String::new(),
+        };
+        Ok(Verdict::accepted(remark))
+    }
+
+    async fn gnss(&self, transport: Transport, id: &str, g: &pb::GnssFix) -> Result<Verdict, Rejection> {
+        let fix = validate::gnss_fix(g)?;
+        let h = self.vehicle(id)?;
+        let ctx = self.registry.ctx();
+        h.shared
+            .admit(InputKind::Gnss, fix.t_ns, ctx.window_ns(), ctx.max_future_ns(), "gnss")
+            .map_err(|r| gate_rejection(Some(r)))?;
+        let wall = wall_ns();
+        self.send(&h, id, Msg::Data(vec![Stamped { input: Input::Gnss(fix), wall_ns: wall, at: Instant::now() }]))
+            .await?;
+        VehicleStats::add(&h.shared.stats.gnss, 1);
+        ctx.metrics.input(transport, Kind::Gnss, Outcome::Accepted, 1);
+        h.shared.last_input_wall_ns.store(wall, std::sync::atomic::Ordering::Relaxed);
+        Ok(Verdict::accepted(String::new()))
+    }
+
+    async fn camera(&self, transport: Transport, id: &str, c: &pb::CameraFrame) -> Result<Verdict, Rejection> {
+        // A frame never creates a vehicle: without a configuration there is no camera to check.
+        let Some(h) = self.registry.get(id) else {
+            return Err(Rejection::precondition(format!(
+                "camera: vehicle {id:?} has no camera configuration (send a VehicleConfig with `camera` first)"
+            )));
+        };
+        let frame = validate::camera_frame(c, h.shared.camera(), self.limits)?;
+        let ctx = self.registry.ctx();
+        h.shared
+            .admit(InputKind::Camera, frame.t_ns, ctx.window_ns(), ctx.max_future_ns(), "camera")
+            .map_err(|r| gate_rejection(Some(r)))?;
+        let wall = wall_ns();
+        let stamped = Stamped { input: Input::Camera(frame), wall_ns: wall, at: Instant::now() };
+        match h.send_camera(stamped, ctx.vehicles.camera_queue).await {
+            Ok(()) => {}
+            Err(SendError::Full) => {
+                ctx.metrics.vision_shed.inc();
+                return Err(Rejection::exhausted("camera: the vehicle's camera queue is full; frame shed"));
+            }
+            Err(SendError::Closed) => return Err(Rejection::exhausted("camera: the vehicle is restarting; frame shed")),
+        }
+        VehicleStats::add(&h.shared.stats.camera, 1);
+        ctx.metrics.input(transport, Kind::Camera, Outcome::Accepted, 1);
+        h.shared.last_input_wall_ns.store(wall, std::sync::atomic::Ordering::Relaxed);
+        Ok(Verdict::accepted(String::new()))
+    }
+
+    /// Sends on the ordered queue, starting a fresh actor once if this one was evicted meanwhile.
+    async fn send(&self, h: &VehicleHandle, id: &str, msg: Msg) -> Result<(), Rejection> {
+        let Err(msg) = h.send_or_return(msg).await else { return Ok(()) };
+        let fresh = self.vehicle(id)?;
+        fresh.send(msg).await.map_err(|_| Rejection::exhausted(format!("vehicle {id:?} is restarting; resend")))
+    }
+
+    /// Creates or reconfigures a vehicle. `wait` waits until the actor applied it.
+    /// Returns whether the vehicle was created.
+    pub async fn configure(&self, id: &str, c: &pb::VehicleConfig, wait: bool) -> Result<bool, Rejection> {
+        validate::vehicle_id(id)?;
+        let (config, spec) = validate::vehicle_config(c, self.limits.max_side_px)?;
+        let (h, created) = self.registry.get_or_create(id, Some(&config)).map_err(registry_rejection)?;
+        h.shared.set_camera(spec);
+        h.shared.configured.store(true, std::sync::atomic::Ordering::Relaxed);
+        if !created {
+            let (tx, rx) = tokio::sync::oneshot::channel();
+            self.send(&h, id, Msg::Configure { config: Box::new(config), reply: Some(tx) }).await?;
+            if wait {
+                let _ = rx.await;
+            }
+        }
+        Ok(created)
+    }
+
+    /// Restarts a vehicle's estimator; `None` when the vehicle is unknown.
+    pub async fn reset(&self, id: &str) -> Result<Option<()>, Rejection> {
+        validate::vehicle_id(id)?;
+        let Some(h) = self.registry.get(id) else { return Ok(None) };
+        h.shared.gate.lock().unwrap_or_else(|p| p.into_inner()).clear();
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        self.send(&h, id, Msg::Reset { reply: Some(tx) }).await?;
+        let _ = rx.await;
+        Ok(Some(()))
+    }
+}
+
+fn registry_rejection(e: RegistryError) -> Rejection {
+    match e {
+        RegistryError::Full(_) => Rejection::exhausted(format!("vehicle_id: {e}")),
+        RegistryError::Stopping => Rejection::precondition(e.to_string()),
+    }
+}
+
+fn refusal_text(r: &GateRefusal) -> &str {
+    match r {
+        GateRefusal::Late(s) | GateRefusal::Future(s) => s,
+    }
+}
+
+fn gate_rejection(r: Option<GateRefusal>) -> Rejection {
+    match r {
+        Some(GateRefusal::Late(reason)) => Rejection { status: pb::IngestStatus::Late, reason },
+        Some(GateRefusal::Future(reason)) => Rejection { status: pb::IngestStatus::OutOfRange, reason },
+        None => Rejection::invalid("no sample accepted"),
+    }
+}

@@ -1,0 +1,193 @@
+//! Prometheus metrics (prometheus-client), shared by every module through [`Metrics`].
+//!
+//! Labels stay low-cardinality (transport, input kind, outcome): per-vehicle detail lives in the
+//! health stream, not in metric labels.
+
+use std::sync::Arc;
+use std::sync::atomic::AtomicU64;
+
+use prometheus_client::encoding::{EncodeLabelSet, EncodeLabelValue, LabelValueEncoder};
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::family::Family;
+use prometheus_client::metrics::gauge::Gauge;
+use prometheus_client::metrics::histogram::{Histogram, exponential_buckets};
+use prometheus_client::registry::Registry;
+
+/// Which transport an input came through.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Transport {
+    /// gRPC `Ingest`.
+    Grpc,
+    /// Zenoh subscription.
+    Zenoh,
+}
+
+/// Kind of input.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Kind {
+    /// IMU sample.
+    Imu,
+    /// GNSS fix.
+    Gnss,
+    /// Camera frame.
+    Camera,
+    /// Vehicle configuration.
+    Config,
+    /// Undecodable message (kind unknown).
+    Malformed,
+}
+
+/// What happened to an input.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Outcome {
+    /// Accepted into the vehicle's window.
+    Accepted,
+    /// Invalid content.
+    Invalid,
+    /// Not applicable in the vehicle's state.
+    Precondition,
+    /// Older than the window or a duplicate.
+    Late,
+    /// Too far ahead of the vehicle's clock.
+    Future,
+    /// Shed by the overload policy.
+    Shed,
+    /// Refused because a limit was reached (too many vehicles, oversize).
+    Exhausted,
+}
+
+/// Label values are the lowercase variant names (Prometheus convention).
+macro_rules! lowercase_label {
+    ($t:ty { $($v:ident => $s:literal),* $(,)? }) => {
+        impl EncodeLabelValue for $t {
+            fn encode(&self, encoder: &mut LabelValueEncoder<'_>) -> Result<(), std::fmt::Error> {
+                use std::fmt::Write;
+                encoder.write_str(match self { $(Self::$v => $s),* })
+            }
+        }
+    };
+}
+
+lowercase_label!(Transport { Grpc => "grpc", Zenoh => "zenoh" });
+lowercase_label!(Kind { Imu => "imu", Gnss => "gnss", Camera => "camera", Config => "config", Malformed => "malformed" });
+lowercase_label!(Outcome {
+    Accepted => "accepted",
+    Invalid => "invalid",
+    Precondition => "precondition",
+    Late => "late",
+    Future => "future",
+    Shed => "shed",
+    Exhausted => "exhausted",
+});
+
+/// Labels of `uavnav_inputs_total`.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, EncodeLabelSet)]
+pub struct InputLabels {
+    /// Transport.
+    pub transport: Transport,
+    /// Kind.
+    pub kind: Kind,
+    /// Outcome.
+    pub outcome: Outcome,
+}
+
+/// Every metric of the service.
+#[derive(Debug, Clone)]
+pub struct Metrics {
+    /// The registry `/metrics` encodes.
+    pub registry: Arc<Registry>,
+    /// Inputs by transport, kind and outcome (IMU counted per sample).
+    pub inputs: Family<InputLabels, Counter>,
+    /// Poses published.
+    pub poses: Counter,
+    /// Health reports published.
+    pub health_reports: Counter,
+    /// Live vehicle actors.
+    pub vehicles: Gauge,
+    /// Actors evicted for idleness.
+    pub evictions: Counter,
+    /// Ingest-to-pose latency, s.
+    pub latency: Histogram,
+    /// Vision jobs completed.
+    pub vision_done: Counter,
+    /// Vision jobs that failed (engine error or panic).
+    pub vision_failed: Counter,
+    /// Camera frames shed because the vision pool or a vehicle's camera queue was full.
+    pub vision_shed: Counter,
+    /// Vision jobs queued or running.
+    pub vision_in_flight: Gauge<i64, AtomicU64>,
+    /// Late / duplicate inputs dropped inside the actors' reorder windows.
+    pub reorder_dropped: Counter,
+    /// Engine errors on inputs that passed validation.
+    pub engine_errors: Counter,
+    /// Outputs the Zenoh publisher could not keep up with (skipped).
+    pub zenoh_output_lagged: Counter,
+}
+
+impl Metrics {
+    /// Creates and registers every metric.
+    pub fn new() -> Self {
+        let mut registry = Registry::with_prefix("uavnav");
+        let inputs = Family::<InputLabels, Counter>::default();
+        let poses = Counter::default();
+        let health_reports = Counter::default();
+        let vehicles = Gauge::default();
+        let evictions = Counter::default();
+        let latency = Histogram::new(exponential_buckets(0.0005, 2.0, 14));
+        let vision_done = Counter::default();
+        let vision_failed = Counter::default();
+        let vision_shed = Counter::default();
+        let vision_in_flight = Gauge::<i64, AtomicU64>::default();
+        let reorder_dropped = Counter::default();
+        let engine_errors = Counter::default();
+        let zenoh_output_lagged = Counter::default();
+        registry.register("inputs", "Sensor inputs by transport, kind and outcome", inputs.clone());
+        registry.register("poses", "Pose estimates published", poses.clone());
+        registry.register("health_reports", "Vehicle health reports published", health_reports.clone());
+        registry.register("vehicles", "Vehicle actors alive", vehicles.clone());
+        registry.register("evictions", "Vehicle actors evicted after the idle time", evictions.clone());
+        registry.register("ingest_to_pose_latency_seconds", "Ingest-to-pose latency", latency.clone());
+        registry.register("vision_jobs_done", "Vision jobs completed", vision_done.clone());
+        registry.register("vision_jobs_failed", "Vision jobs failed", vision_failed.clone());
+        registry.register("vision_frames_shed", "Camera frames shed by the overload policy", vision_shed.clone());
+        registry.register("vision_in_flight", "Vision jobs queued or running", vision_in_flight.clone());
+        registry.register("reorder_dropped", "Inputs dropped as late or duplicate in reorder windows", reorder_dropped.clone());
+        registry.register("engine_errors", "Estimator errors on validated inputs", engine_errors.clone());
+        registry.register("zenoh_output_lagged", "Outputs skipped by a lagging Zenoh publisher", zenoh_output_lagged.clone());
+        Self {
+            registry: Arc::new(registry),
+            inputs,
+            poses,
+            health_reports,
+            vehicles,
+            evictions,
+            latency,
+            vision_done,
+            vision_failed,
+            vision_shed,
+            vision_in_flight,
+            reorder_dropped,
+            engine_errors,
+            zenoh_output_lagged,
+        }
+    }
+
+    /// Counts `n` inputs.
+    pub fn input(&self, transport: Transport, kind: Kind, outcome: Outcome, n: u64) {
+        self.inputs.get_or_create(&InputLabels { transport, kind, outcome }).inc_by(n);
+    }
+
+    /// The text exposition of every metric.
+    pub fn encode(&self) -> String {
+        let mut out = String::new();
+        // Writing into a String cannot fail.
+        let _ = prometheus_client::encoding::text::encode(&mut out, &self.registry);
+        out
+    }
+}
+
+impl Default for Metrics {
+    fn default() -> Self {
+        Self::new()
+    }
+}

@@ -1,0 +1,138 @@
+//! The product [`Engine`]: `uavnav_runner::VehicleRunner` (vision front end + estimator) behind the
+//! engine seam, and the conversion of its outputs to the wire messages.
+
+use uavnav_core::{SensorEvent, VehicleConfig};
+use uavnav_proto::v1 as pb;
+use uavnav_runner::{Health, Mode, PoseOutput, RunnerParams, Step, VehicleRunner, VisionDone};
+
+use crate::engine::{Engine, EngineError, EngineFactory, EngineHealth, EngineStep, VisionResult};
+
+/// Builds [`RunnerEngine`]s with the same parameters for every vehicle.
+#[derive(Debug, Clone, Default)]
+pub struct RunnerFactory {
+    /// Runner parameters (defaults = those of `uavnav estimate`).
+    pub params: RunnerParams,
+}
+
+impl EngineFactory for RunnerFactory {
+    fn create(&self, config: &VehicleConfig) -> Box<dyn Engine> {
+        Box::new(RunnerEngine { runner: VehicleRunner::new(config.clone(), self.params.clone(), None), last_t_ns: 0 })
+    }
+}
+
+/// One vehicle's runner.
+#[derive(Debug)]
+pub struct RunnerEngine {
+    runner: VehicleRunner,
+    last_t_ns: i64,
+}
+
+impl RunnerEngine {
+    fn step(&mut self, step: Step) -> EngineStep {
+        if let Some(p) = step.poses.last() {
+            self.last_t_ns = p.t_ns;
+        }
+        EngineStep {
+            poses: step.poses.iter().map(pose_to_wire).collect(),
+            work: step.job.map(|job| Box::new(move || Box::new(job.run()) as VisionResult) as _),
+        }
+    }
+}
+
+impl Engine for RunnerEngine {
+    fn push(&mut self, event: SensorEvent) -> Result<EngineStep, EngineError> {
+        let step = self.runner.push(event).map_err(|e| EngineError(e.to_string()))?;
+        Ok(self.step(step))
+    }
+
+    fn finish_frame(&mut self, done: VisionResult) -> EngineStep {
+        match done.downcast::<VisionDone>() {
+            Ok(done) => {
+                let step = self.runner.finish_frame(*done);
+                self.step(step)
+            }
+            // Only this engine's jobs come back here; anything else is a wiring bug, not input.
+            Err(_) => EngineStep::default(),
+        }
+    }
+
+    fn health(&self) -> EngineHealth {
+        let h = self.runner.health();
+        let v = self.runner.vision_stats();
+        let vision = (v.frames > 0).then(|| pb::VisionQuality {
+            tracked: v.last_tracked,
+            inliers: v.last_inliers,
+            quality: v.last_quality,
+            solver: match v.last_solver {
+                Some(uavnav_core::EgomotionSolver::Plane) => pb::VisionSolver::Homography as i32,
+                Some(_) => pb::VisionSolver::Essential as i32,
+                None => pb::VisionSolver::Unspecified as i32,
+            },
+            t_ns: self.last_t_ns,
+        });
+        EngineHealth {
+            mode: mode_to_wire(h.mode),
+            t_ns: self.last_t_ns,
+            innovation: innovation(&h),
+            vision,
+            gnss_gate_rejections: h.gnss_pos.rejected + h.gnss_vel.rejected,
+            vision_gate_rejections: h.vision_rot.rejected + h.vision_trans.rejected,
+            engine_dropped: h.inputs_rejected + h.late_dropped + v.abandoned,
+        }
+    }
+
+    fn reset(&mut self) {
+        self.runner.reset();
+        self.last_t_ns = 0;
+    }
+}
+
+fn innovation(h: &Health) -> pb::InnovationRatios {
+    pb::InnovationRatios {
+        gnss_position: h.gnss_pos.test_ratio,
+        gnss_velocity: h.gnss_vel.test_ratio,
+        vision: h.vision_rot.test_ratio.max(h.vision_trans.test_ratio),
+    }
+}
+
+/// Estimator mode → wire.
+pub fn mode_to_wire(m: Mode) -> pb::EstimatorMode {
+    match m {
+        Mode::Initialising => pb::EstimatorMode::Initialising,
+        Mode::Nominal => pb::EstimatorMode::Nominal,
+        Mode::GnssDeniedVision => pb::EstimatorMode::GnssDeniedVision,
+        Mode::InertialOnly => pb::EstimatorMode::InertialOnly,
+        Mode::Diverged => pb::EstimatorMode::Diverged,
+    }
+}
+
+/// Estimator pose → wire (without `vehicle_id` and `ingest_wall_ns`).
+pub fn pose_to_wire(p: &PoseOutput) -> pb::PoseEstimate {
+    let mut aiding = Vec::new();
+    if p.aiding.gnss_pos {
+        aiding.push(pb::AidingSource::GnssPosition as i32);
+    }
+    if p.aiding.gnss_vel {
+        aiding.push(pb::AidingSource::GnssVelocity as i32);
+    }
+    if p.aiding.vision_rot || p.aiding.vision_trans {
+        aiding.push(pb::AidingSource::Vision as i32);
+    }
+    pb::PoseEstimate {
+        vehicle_id: String::new(),
+        t_ns: p.t_ns,
+        position: Some((&p.lla).into()),
+        vel_ned_mps: Some((&p.vel_ned_mps).into()),
+        nav_from_body: Some((&p.nav_from_body).into()),
+        roll_rad: p.euler_rad.x,
+        pitch_rad: p.euler_rad.y,
+        yaw_rad: p.euler_rad.z,
+        sigma_pos_ned_m: Some((&p.sigma_pos_ned_m).into()),
+        sigma_vel_ned_mps: Some((&p.sigma_vel_mps).into()),
+        sigma_att_rad: Some((&p.sigma_att_rad).into()),
+        covariance_9x9: Vec::new(),
+        aiding_sources: aiding,
+        mode: mode_to_wire(p.health.mode) as i32,
+        ingest_wall_ns: 0,
+    }
+}

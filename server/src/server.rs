@@ -1,0 +1,217 @@
+//! [`Server::start`]: binds every port (port 0 works), starts the transports and returns a
+//! [`RunningServer`] that reports the bound addresses and shuts down gracefully. Tests and
+//! `uavnav demo` run the service in-process through it.
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use anyhow::{Context, anyhow};
+use tokio::sync::{oneshot, watch};
+use tokio::task::JoinHandle;
+use tonic::codec::CompressionEncoding;
+use tracing::{info, warn};
+use uavnav_proto::v1::uav_nav_server::UavNavServer;
+
+use crate::actor::{Ctx, Msg};
+use crate::config::Config;
+use crate::engine::{SharedFactory, default_factory};
+use crate::grpc::{UavNavService, remap_transport_status};
+use crate::http::{HttpState, router};
+use crate::hub::Hub;
+use crate::ingest::Ingestor;
+use crate::metrics::Metrics;
+use crate::registry::Registry;
+use crate::validate::ImageLimits;
+use crate::vision_pool::VisionPool;
+use crate::zenoh_io::ZenohIo;
+
+/// How long the gRPC and HTTP servers get to finish in-flight calls at shutdown.
+const SERVE_DRAIN: Duration = Duration::from_secs(5);
+
+/// Entry point of the service.
+#[derive(Debug, Clone, Copy)]
+pub struct Server;
+
+/// A started service.
+#[derive(Debug)]
+pub struct RunningServer {
+    /// The bound gRPC address.
+    pub grpc_addr: SocketAddr,
+    /// The bound HTTP address.
+    pub http_addr: SocketAddr,
+    /// The Zenoh locators listened on (empty without Zenoh).
+    pub zenoh_locators: Vec<String>,
+    registry: Arc<Registry>,
+    stop_tx: watch::Sender<bool>,
+    ready: Arc<AtomicBool>,
+    health: tonic_health::server::HealthReporter,
+    zenoh: Option<ZenohIo>,
+    grpc: (JoinHandle<()>, oneshot::Sender<()>),
+    http: (JoinHandle<()>, oneshot::Sender<()>),
+    pool: Arc<VisionPool>,
+}
+
+impl Server {
+    /// Starts the service with the product estimator.
+    pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
+        Self::start_with(config, default_factory()).await
+    }
+
+    /// Starts the service with a given engine factory (tests plug scripted engines here).
+    pub async fn start_with(config: Config, factory: SharedFactory) -> anyhow::Result<RunningServer> {
+        config.check()?;
+        let metrics = Metrics::new();
+        let (hub, stop_tx) = Hub::new();
+        let pool = VisionPool::new(config.vision.effective_workers(), config.vision.queue).context("starting the vision pool")?;
+        let ctx = Arc::new(Ctx {
+            vehicles: config.vehicles.clone(),
+            health_period: Duration::from_millis(config.health.period_ms),
+            metrics: metrics.clone(),
+            hub: hub.clone(),
+            pool: Arc::clone(&pool),
+            factory,
+        });
+        let registry = Registry::new(ctx);
+        let limits = ImageLimits { max_bytes: config.vision.max_image_bytes, max_side_px: config.vision.max_image_side_px };
+        let ingestor = Ingestor::new(Arc::clone(&registry), limits, config.grpc.max_message_bytes);
+
+        let zenoh = if config.zenoh.enabled {
+            Some(ZenohIo::start(&config.zenoh, ingestor.clone(), hub.clone()).await?)
+        } else {
+            None
+        };
+        let (health, health_service) = tonic_health::server::health_reporter();
+        health.set_serving::<UavNavServer<UavNavService>>().await;
+        let (grpc_addr, grpc) = serve_grpc(&config, ingestor, health_service).await?;
+        let ready = Arc::new(AtomicBool::new(true));
+        let (http_addr, http) =
+            serve_http(config.http.addr, HttpState { metrics, ready: Arc::clone(&ready) }).await?;
+        let zenoh_locators = zenoh.as_ref().map(|z| z.locators.clone()).unwrap_or_default();
+        info!(%grpc_addr, %http_addr, zenoh = ?zenoh_locators, "uavnavd serving");
+        Ok(RunningServer { grpc_addr, http_addr, zenoh_locators, registry, stop_tx, ready, health, zenoh, grpc, http, pool })
+    }
+}
+
+async fn serve_grpc(
+    config: &Config,
+    ingestor: Ingestor,
+    health_service: tonic_health::pb::health_server::HealthServer<impl tonic_health::pb::health_server::Health>,
+) -> anyhow::Result<(SocketAddr, (JoinHandle<()>, oneshot::Sender<()>))> {
+    let max = config.grpc.max_message_bytes;
+    let service = UavNavServer::new(UavNavService::new(ingestor, config.grpc.ack_buffer))
+        .max_decoding_message_size(max)
+        .max_encoding_message_size(max)
+        .accept_compressed(CompressionEncoding::Gzip)
+        .accept_compressed(CompressionEncoding::Zstd)
+        .send_compressed(CompressionEncoding::Gzip)
+        .send_compressed(CompressionEncoding::Zstd);
+    let fds = uavnav_proto::FILE_DESCRIPTOR_SET;
+    let reflection_v1 = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(fds)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .build_v1()
+        .map_err(|e| anyhow!("reflection v1: {e}"))?;
+    let reflection_v1alpha = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(fds)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .build_v1alpha()
+        .map_err(|e| anyhow!("reflection v1alpha: {e}"))?;
+    let listener = tokio::net::TcpListener::bind(config.grpc.addr)
+        .await
+        .with_context(|| format!("binding gRPC on {}", config.grpc.addr))?;
+    let addr = listener.local_addr()?;
+    let incoming = tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true));
+    let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let router = tonic::transport::Server::builder()
+        .layer(axum::middleware::map_response(remap_transport_status::<tonic::body::Body>))
+        .add_service(service)
+        .add_service(health_service)
+        .add_service(reflection_v1)
+        .add_service(reflection_v1alpha);
+    let task = tokio::spawn(async move {
+        if let Err(e) = router.serve_with_incoming_shutdown(incoming, async { let _ = stop_rx.await; }).await {
+            warn!(error = %e, "gRPC server ended with an error");
+        }
+    });
+    Ok((addr, (task, stop_tx)))
+}
+
+async fn serve_http(addr: SocketAddr, state: HttpState) -> anyhow::Result<(SocketAddr, (JoinHandle<()>, oneshot::Sender<()>))> {
+    let listener = tokio::net::TcpListener::bind(addr).await.with_context(|| format!("binding HTTP on {addr}"))?;
+    let bound = listener.local_addr()?;
+    let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let app = router(state);
+    let task = tokio::spawn(async move {
+        let serve = axum::serve(listener, app).with_graceful_shutdown(async { let _ = stop_rx.await; });
+        if let Err(e) = serve.await {
+            warn!(error = %e, "HTTP server ended with an error");
+        }
+    });
+    Ok((bound, (task, stop_tx)))
+}
+
+impl RunningServer {
+    /// The vehicle registry (for in-process inspection).
+    pub fn registry(&self) -> &Arc<Registry> {
+        &self.registry
+    }
+
+    /// The metrics.
+    pub fn metrics(&self) -> &Metrics {
+        &self.registry.ctx().metrics
+    }
+
+    /// Runs until SIGTERM / SIGINT, then shuts down gracefully.
+    pub async fn run_until_signal(self) -> anyhow::Result<()> {
+        crate::shutdown::signal().await;
+        self.shutdown().await
+    }
+
+    /// Graceful shutdown (see [`crate::shutdown`] for the order).
+    pub async fn shutdown(mut self) -> anyhow::Result<()> {
+        info!("shutting down: draining vehicles");
+        self.ready.store(false, Ordering::Release);
+        self.health.set_not_serving::<UavNavServer<UavNavService>>().await;
+        let _ = self.stop_tx.send(true);
+        if let Some(z) = self.zenoh.as_mut() {
+            z.stop_inputs();
+        }
+        let (grpc_task, grpc_stop) = self.grpc;
+        let _ = grpc_stop.send(());
+        drain_actors(&self.registry).await;
+        if tokio::time::timeout(SERVE_DRAIN, grpc_task).await.is_err() {
+            warn!("gRPC calls still open after {SERVE_DRAIN:?}; closing them");
+        }
+        if let Some(z) = self.zenoh.take() {
+            z.close().await;
+        }
+        let (http_task, http_stop) = self.http;
+        let _ = http_stop.send(());
+        let _ = tokio::time::timeout(SERVE_DRAIN, http_task).await;
+        let pool = Arc::clone(&self.pool);
+        let _ = tokio::task::spawn_blocking(move || pool.shutdown()).await;
+        info!("shutdown complete");
+        Ok(())
+    }
+}
+
+/// Stops every actor and waits until each has fused its queue and published its final health.
+async fn drain_actors(registry: &Registry) {
+    let handles = registry.take_all();
+    let n = handles.len();
+    let mut waits = Vec::with_capacity(n);
+    for h in handles {
+        let mut final_health = h.shared.latest_health.subscribe();
+        final_health.mark_unchanged();
+        if h.send(Msg::Stop).await.is_ok() {
+            waits.push(async move {
+                // The actor's last act is publishing health; a closed channel means it is gone.
+                let _ = tokio::time::timeout(SERVE_DRAIN, final_health.changed()).await;
+            });
+        }
+    }
+    futures::future::join_all(waits).await;
+    info!(vehicles = n, "vehicles drained");
+}

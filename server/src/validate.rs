@@ -1,0 +1,258 @@
+//! Input validation: every wire message is checked field by field before it can reach an actor,
+//! so bad input never crashes the process or touches another vehicle. A refusal carries the exact
+//! [`pb::IngestStatus`] and a reason naming the field.
+//!
+//! Field-level conversion and plausibility limits are the wire contract's (`uavnav_proto::convert`);
+//! this module adds what only the service knows: vehicle ids, batch and image size limits, image
+//! headers against the vehicle's configured camera, and the status of each refusal.
+
+use uavnav_core::{CameraFrame, GnssFix, ImageFormat, ImuSample, VehicleConfig};
+use uavnav_proto::convert::{self, ConvertError};
+use uavnav_proto::v1 as pb;
+
+/// Most IMU samples in one batch.
+pub const MAX_IMU_BATCH: usize = 10_000;
+/// Longest vehicle id.
+pub const MAX_ID_LEN: usize = 128;
+
+/// A refused input: the ack status and a reason naming the field.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{reason}")]
+pub struct Rejection {
+    /// Ack status.
+    pub status: pb::IngestStatus,
+    /// Reason, starting with the field path.
+    pub reason: String,
+}
+
+impl Rejection {
+    /// INVALID_ARGUMENT.
+    pub fn invalid(reason: impl Into<String>) -> Self {
+        Self { status: pb::IngestStatus::InvalidArgument, reason: reason.into() }
+    }
+
+    /// FAILED_PRECONDITION.
+    pub fn precondition(reason: impl Into<String>) -> Self {
+        Self { status: pb::IngestStatus::FailedPrecondition, reason: reason.into() }
+    }
+
+    /// RESOURCE_EXHAUSTED.
+    pub fn exhausted(reason: impl Into<String>) -> Self {
+        Self { status: pb::IngestStatus::ResourceExhausted, reason: reason.into() }
+    }
+
+    /// The matching gRPC status (for unary calls).
+    pub fn to_status(&self) -> tonic::Status {
+        let code = match self.status {
+            pb::IngestStatus::InvalidArgument => tonic::Code::InvalidArgument,
+            pb::IngestStatus::FailedPrecondition => tonic::Code::FailedPrecondition,
+            pb::IngestStatus::ResourceExhausted => tonic::Code::ResourceExhausted,
+            pb::IngestStatus::OutOfRange => tonic::Code::OutOfRange,
+            pb::IngestStatus::Late => tonic::Code::OutOfRange,
+            _ => tonic::Code::Unknown,
+        };
+        tonic::Status::new(code, self.reason.clone())
+    }
+}
+
+type Check<T> = Result<T, Rejection>;
+
+/// Checks a vehicle id: 1–128 characters of `[A-Za-z0-9_.-]` (also a Zenoh key chunk).
+pub fn vehicle_id(id: &str) -> Check<()> {
+    if id.is_empty() {
+        return Err(Rejection::invalid("vehicle_id: must not be empty"));
+    }
+    if id.len() > MAX_ID_LEN {
+        return Err(Rejection::invalid(format!("vehicle_id: longer than {MAX_ID_LEN} characters")));
+    }
+    if let Some(c) = id.chars().find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '_' | '.' | '-'))) {
+        return Err(Rejection::invalid(format!("vehicle_id: character {c:?} not allowed (use [A-Za-z0-9_.-])")));
+    }
+    Ok(())
+}
+
+/// A conversion error from the wire contract, with the enclosing field's name in front.
+fn invalid_in(parent: &str, e: ConvertError) -> Rejection {
+    Rejection::invalid(e.within(parent).to_string())
+}
+
+/// Validates an IMU batch (finite, plausible, strictly increasing times) and converts it.
+pub fn imu_batch(b: &pb::ImuBatch) -> Check<Vec<ImuSample>> {
+    if b.samples.is_empty() {
+        return Err(Rejection::invalid("imu.samples: empty batch"));
+    }
+    if b.samples.len() > MAX_IMU_BATCH {
+        return Err(Rejection::exhausted(format!("imu.samples: {} samples, limit {MAX_IMU_BATCH}", b.samples.len())));
+    }
+    let samples = convert::sensors::imu_batch(b).map_err(|e| invalid_in("imu", e))?;
+    if let Some((i, s)) = samples.iter().enumerate().find(|(_, s)| s.t_ns < 0) {
+        return Err(Rejection::invalid(format!("imu.samples[{i}].t_ns: {} is negative", s.t_ns)));
+    }
+    Ok(samples)
+}
+
+/// Validates a GNSS fix and converts it.
+pub fn gnss_fix(g: &pb::GnssFix) -> Check<GnssFix> {
+    let fix = GnssFix::try_from(g).map_err(|e| invalid_in("gnss", e))?;
+    if fix.t_ns < 0 {
+        return Err(Rejection::invalid(format!("gnss.t_ns: {} is negative", fix.t_ns)));
+    }
+    Ok(fix)
+}
+
+/// What the service knows of a vehicle's camera, to check frames against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CameraSpec {
+    /// Camera index.
+    pub camera_id: u32,
+    /// Width, px.
+    pub width: u32,
+    /// Height, px.
+    pub height: u32,
+}
+
+/// Image limits.
+#[derive(Debug, Clone, Copy)]
+pub struct ImageLimits {
+    /// Largest compressed size, bytes.
+    pub max_bytes: usize,
+    /// Largest side, px.
+    pub max_side_px: u32,
+}
+
+/// Validates a camera frame against the vehicle's camera (if any) and converts it.
+pub fn camera_frame(c: &pb::CameraFrame, camera: Option<CameraSpec>, limits: ImageLimits) -> Check<CameraFrame> {
+    let Some(spec) = camera else {
+        return Err(Rejection::precondition(
+            "camera: the vehicle has no camera configuration (send a VehicleConfig with `camera` first)",
+        ));
+    };
+    if c.camera_id != spec.camera_id {
+        return Err(Rejection::precondition(format!(
+            "camera.camera_id: {} is not configured (configured: {})",
+            c.camera_id, spec.camera_id
+        )));
+    }
+    // Size first: the conversion copies the bytes.
+    let size = c.image.as_ref().map_or(0, |i| i.data.len());
+    if size > limits.max_bytes {
+        return Err(Rejection::exhausted(format!("camera.image.data: {size} bytes, limit {}", limits.max_bytes)));
+    }
+    let frame = CameraFrame::try_from(c).map_err(|e| invalid_in("camera", e))?;
+    if frame.t_ns < 0 {
+        return Err(Rejection::invalid(format!("camera.t_ns: {} is negative", frame.t_ns)));
+    }
+    let (w, h) = match frame.format {
+        ImageFormat::Jpeg => jpeg_dimensions(&frame.data),
+        ImageFormat::Png => png_dimensions(&frame.data),
+    }
+    .ok_or_else(|| Rejection::invalid(format!("camera.image.data: corrupt {} header", frame.format.as_str())))?;
+    if w > limits.max_side_px || h > limits.max_side_px {
+        return Err(Rejection::exhausted(format!(
+            "camera.image: {w}x{h} px exceeds the {} px limit",
+            limits.max_side_px
+        )));
+    }
+    if (w, h) != (spec.width, spec.height) {
+        return Err(Rejection::invalid(format!(
+            "camera.image: {w}x{h} px does not match the configured {}x{}",
+            spec.width, spec.height
+        )));
+    }
+    Ok(frame)
+}
+
+/// Width and height from a JPEG's SOF segment, walking the marker segments; `None` when the
+/// header is truncated or malformed.
+pub fn jpeg_dimensions(d: &[u8]) -> Option<(u32, u32)> {
+    if d.get(0..2)? != [0xFF, 0xD8] {
+        return None;
+    }
+    let mut i = 2;
+    loop {
+        // Fill bytes (0xFF) may precede a marker.
+        while *d.get(i)? == 0xFF && *d.get(i + 1)? == 0xFF {
+            i += 1;
+        }
+        if *d.get(i)? != 0xFF {
+            return None;
+        }
+        let marker = *d.get(i + 1)?;
+        let len = u16::from_be_bytes([*d.get(i + 2)?, *d.get(i + 3)?]) as usize;
+        if len < 2 {
+            return None;
+        }
+        let is_sof = matches!(marker, 0xC0..=0xCF) && !matches!(marker, 0xC4 | 0xC8 | 0xCC);
+        if is_sof {
+            let seg = d.get(i + 4..i + 2 + len)?;
+            let h = u16::from_be_bytes([*seg.get(1)?, *seg.get(2)?]) as u32;
+            let w = u16::from_be_bytes([*seg.get(3)?, *seg.get(4)?]) as u32;
+            return (w > 0 && h > 0).then_some((w, h));
+        }
+        if marker == 0xD9 || marker == 0xDA {
+            return None; // end of image or scan data before any frame header
+        }
+        i += 2 + len;
+    }
+}
+
+/// Width and height from a PNG's IHDR chunk.
+pub fn png_dimensions(d: &[u8]) -> Option<(u32, u32)> {
+    if d.get(12..16)? != b"IHDR" {
+        return None;
+    }
+    let w = u32::from_be_bytes(d.get(16..20)?.try_into().ok()?);
+    let h = u32::from_be_bytes(d.get(20..24)?.try_into().ok()?);
+    (w > 0 && h > 0).then_some((w, h))
+}
+
+/// Validates a vehicle configuration and converts it; also returns the camera spec for frames.
+pub fn vehicle_config(c: &pb::VehicleConfig, max_side_px: u32) -> Check<(VehicleConfig, Option<CameraSpec>)> {
+    let config = VehicleConfig::try_from(c).map_err(|e| invalid_in("config", e))?;
+    let spec = match (&c.camera, &config.camera) {
+        (Some(wire), Some(cam)) => {
+            let (width, height) = (cam.model.width, cam.model.height);
+            if width > max_side_px || height > max_side_px {
+                return Err(Rejection::invalid(format!(
+                    "config.camera: {width}x{height} px exceeds the {max_side_px} px limit"
+                )));
+            }
+            Some(CameraSpec { camera_id: wire.camera_id, width, height })
+        }
+        _ => None,
+    };
+    Ok((config, spec))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ids() {
+        assert!(vehicle_id("uav-01.a_b").is_ok());
+        assert!(vehicle_id("").is_err());
+        assert!(vehicle_id("a/b").unwrap_err().reason.contains("'/'"));
+        assert!(vehicle_id(&"x".repeat(129)).is_err());
+    }
+
+    #[test]
+    fn imu_backwards_and_nan_name_the_field() {
+        let s = |t, gx| pb::ImuSample { t_ns: t, gyro_x_radps: gx, accel_z_mps2: -9.8, ..Default::default() };
+        let e = imu_batch(&pb::ImuBatch { samples: vec![s(10, 0.0), s(5, 0.0)] }).unwrap_err();
+        assert!(e.reason.starts_with("imu.samples[1].t_ns"), "{}", e.reason);
+        let e = imu_batch(&pb::ImuBatch { samples: vec![s(10, f64::NAN)] }).unwrap_err();
+        assert!(e.reason.starts_with("imu.samples[0].gyro_x_radps"), "{}", e.reason);
+        assert_eq!(e.status, pb::IngestStatus::InvalidArgument);
+    }
+
+    #[test]
+    fn jpeg_header_parsing() {
+        // SOI, APP0 (len 4, 2 payload bytes), SOF0 with 480x640.
+        let mut d = vec![0xFF, 0xD8, 0xFF, 0xE0, 0x00, 0x04, 0, 0];
+        d.extend([0xFF, 0xC0, 0x00, 0x0B, 8, 0x01, 0xE0, 0x02, 0x80, 1, 1, 0x11, 0]);
+        assert_eq!(jpeg_dimensions(&d), Some((640, 480)));
+        assert_eq!(jpeg_dimensions(&d[..12]), None, "truncated");
+        assert_eq!(jpeg_dimensions(&[0xFF, 0xD8, 0x00, 0x01]), None, "garbage");
+    }
+}

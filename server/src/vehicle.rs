@@ -1,0 +1,224 @@
+//! What the outside sees of one vehicle without asking its actor: counters, the ingest time gate,
+//! and the latest pose and health. The estimator itself is owned by the actor alone.
+
+use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, RwLock};
+
+use tokio::sync::watch;
+use uavnav_proto::v1 as pb;
+
+use crate::validate::CameraSpec;
+
+/// Input kinds, in the order that breaks timestamp ties in the reorder window.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum InputKind {
+    /// IMU sample.
+    Imu = 0,
+    /// GNSS fix.
+    Gnss = 1,
+    /// Camera frame.
+    Camera = 2,
+}
+
+impl InputKind {
+    /// Field name used in rejection reasons.
+    pub fn field(self) -> &'static str {
+        match self {
+            InputKind::Imu => "imu",
+            InputKind::Gnss => "gnss",
+            InputKind::Camera => "camera",
+        }
+    }
+}
+
+/// Monotonic counters of one vehicle (since the actor was created).
+#[derive(Debug, Default)]
+pub struct VehicleStats {
+    /// Accepted IMU samples.
+    pub imu: AtomicU64,
+    /// Accepted GNSS fixes.
+    pub gnss: AtomicU64,
+    /// Accepted camera frames.
+    pub camera: AtomicU64,
+    /// Rejected as invalid (any transport).
+    pub rejected: AtomicU64,
+    /// Late (older than the window) or duplicate time.
+    pub late: AtomicU64,
+    /// Shed by the overload policy.
+    pub shed: AtomicU64,
+    /// Dropped for other reasons (duplicates in the window, engine errors).
+    pub dropped: AtomicU64,
+}
+
+impl VehicleStats {
+    /// Adds `n` to a counter.
+    pub fn add(counter: &AtomicU64, n: u64) {
+        counter.fetch_add(n, Ordering::Relaxed);
+    }
+
+    /// Reads a counter.
+    pub fn get(counter: &AtomicU64) -> u64 {
+        counter.load(Ordering::Relaxed)
+    }
+
+    /// Accepted inputs of every kind.
+    pub fn accepted(&self) -> u64 {
+        Self::get(&self.imu) + Self::get(&self.gnss) + Self::get(&self.camera)
+    }
+}
+
+/// Why the time gate refused a sample.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum GateRefusal {
+    /// Older than the reorder window allows, or the same time as the previous sample of its kind.
+    Late(String),
+    /// Too far ahead of the vehicle's newest sample.
+    Future(String),
+}
+
+/// Per-vehicle timestamp bookkeeping done at ingest, so a sender learns at once (in its ack)
+/// that a sample is late, duplicated or from the far future.
+#[derive(Debug, Default)]
+pub struct TimeGate {
+    newest_ns: Option<i64>,
+    last_ns: [Option<i64>; 3],
+}
+
+impl TimeGate {
+    /// Checks `t_ns` for `kind` and records it when accepted.
+    pub fn admit(
+        &mut self,
+        kind: InputKind,
+        t_ns: i64,
+        window_ns: i64,
+        max_future_ns: i64,
+        field: &str,
+    ) -> Result<(), GateRefusal> {
+        if let Some(newest) = self.newest_ns {
+            if t_ns > newest.saturating_add(max_future_ns) {
+                return Err(GateRefusal::Future(format!(
+                    "{field}: t_ns {t_ns} is {:.3} s ahead of the vehicle's newest sample (limit {:.3} s)",
+                    (t_ns - newest) as f64 * 1e-9,
+                    max_future_ns as f64 * 1e-9
+                )));
+            }
+            if t_ns < newest.saturating_sub(window_ns) {
+                return Err(GateRefusal::Late(format!(
+                    "{field}: t_ns {t_ns} is {:.3} s older than the vehicle's newest sample (reorder window {:.3} s)",
+                    (newest - t_ns) as f64 * 1e-9,
+                    window_ns as f64 * 1e-9
+                )));
+            }
+        }
+        if self.last_ns[kind as usize] == Some(t_ns) {
+            return Err(GateRefusal::Late(format!("{field}: duplicate t_ns {t_ns}")));
+        }
+        self.last_ns[kind as usize] = Some(t_ns);
+        self.newest_ns = Some(self.newest_ns.map_or(t_ns, |n| n.max(t_ns)));
+        Ok(())
+    }
+
+    /// Forgets the stream (after a reset).
+    pub fn clear(&mut self) {
+        *self = Self::default();
+    }
+}
+
+/// The shared face of one vehicle.
+#[derive(Debug)]
+pub struct VehicleShared {
+    /// Vehicle identifier.
+    pub id: Arc<str>,
+    /// Counters.
+    pub stats: VehicleStats,
+    /// Ingest time gate.
+    pub gate: Mutex<TimeGate>,
+    /// The vehicle's camera, if configured (frames are refused otherwise).
+    pub camera: RwLock<Option<CameraSpec>>,
+    /// Whether a configuration was given.
+    pub configured: AtomicBool,
+    /// Camera frames in the actor's queue (bounded by `vehicles.camera_queue`; beyond, shed).
+    pub frames_queued: AtomicUsize,
+    /// Service wall time of the latest input, ns since the UNIX epoch.
+    pub last_input_wall_ns: AtomicI64,
+    /// Latest pose.
+    pub latest_pose: watch::Sender<Option<Arc<pb::PoseEstimate>>>,
+    /// Latest health report.
+    pub latest_health: watch::Sender<Option<Arc<pb::VehicleHealth>>>,
+}
+
+impl VehicleShared {
+    /// A fresh vehicle.
+    pub fn new(id: Arc<str>) -> Self {
+        Self {
+            id,
+            stats: VehicleStats::default(),
+            gate: Mutex::new(TimeGate::default()),
+            camera: RwLock::new(None),
+            configured: AtomicBool::new(false),
+            frames_queued: AtomicUsize::new(0),
+            last_input_wall_ns: AtomicI64::new(0),
+            latest_pose: watch::channel(None).0,
+            latest_health: watch::channel(None).0,
+        }
+    }
+
+    /// Runs the time gate (a poisoned lock only means another thread panicked mid-check: the
+    /// gate's state is still consistent, so it is used as is).
+    pub fn admit(
+        &self,
+        kind: InputKind,
+        t_ns: i64,
+        window_ns: i64,
+        max_future_ns: i64,
+        field: &str,
+    ) -> Result<(), GateRefusal> {
+        let mut gate = self.gate.lock().unwrap_or_else(|p| p.into_inner());
+        gate.admit(kind, t_ns, window_ns, max_future_ns, field)
+    }
+
+    /// The configured camera, if any.
+    pub fn camera(&self) -> Option<CameraSpec> {
+        *self.camera.read().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Records the configured camera.
+    pub fn set_camera(&self, spec: Option<CameraSpec>) {
+        *self.camera.write().unwrap_or_else(|p| p.into_inner()) = spec;
+    }
+
+    /// The latest pose, if any.
+    pub fn pose(&self) -> Option<Arc<pb::PoseEstimate>> {
+        self.latest_pose.borrow().clone()
+    }
+
+    /// The latest health report, if any.
+    pub fn health(&self) -> Option<Arc<pb::VehicleHealth>> {
+        self.latest_health.borrow().clone()
+    }
+}
+
+/// Nanoseconds since the UNIX epoch on the service's wall clock.
+pub fn wall_ns() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos() as i64)
+        .unwrap_or(0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gate_refuses_late_duplicate_and_future() {
+        let mut g = TimeGate::default();
+        let (w, f) = (100, 1_000);
+        assert!(g.admit(InputKind::Imu, 1_000, w, f, "imu").is_ok());
+        assert!(matches!(g.admit(InputKind::Imu, 1_000, w, f, "imu"), Err(GateRefusal::Late(_))));
+        assert!(g.admit(InputKind::Gnss, 950, w, f, "gnss").is_ok(), "within the window");
+        assert!(matches!(g.admit(InputKind::Gnss, 800, w, f, "gnss"), Err(GateRefusal::Late(_))));
+        assert!(matches!(g.admit(InputKind::Imu, 3_000, w, f, "imu"), Err(GateRefusal::Future(_))));
+        assert!(g.admit(InputKind::Imu, 1_900, w, f, "imu").is_ok());
+    }
+}

@@ -1,0 +1,366 @@
+//! The embedded Zenoh session: the same actors as gRPC, fed and watched through key expressions.
+//!
+//! | key expression | direction | payload |
+//! |---|---|---|
+//! | `uavnav/v1/vehicle/{id}/imu` | in | `uavnav.v1.ImuBatch` |
+//! | `uavnav/v1/vehicle/{id}/gnss` | in | `uavnav.v1.GnssFix` |
+//! | `uavnav/v1/vehicle/{id}/camera` | in | `uavnav.v1.CameraFrame` |
+//! | `uavnav/v1/vehicle/{id}/config` | in | `uavnav.v1.VehicleConfig` |
+//! | `uavnav/v1/vehicle/{id}/pose` | out | `uavnav.v1.PoseEstimate` |
+//! | `uavnav/v1/vehicle/{id}/health` | out | `uavnav.v1.VehicleHealth` |
+//! | `uavnav/v1/vehicle/{id}/pose/latest` | queryable | `uavnav.v1.PoseEstimate` |
+//! | `uavnav/v1/vehicles` | queryable | `uavnav.v1.ListVehiclesResponse` |
+//! | `uavnav/v1/service/{instance}` | liveliness token | — |
+//! | `uavnav/v1/vehicle/{id}/alive` | liveliness token | — |
+//!
+//! Payloads are the protobuf encoding of the message, with Zenoh encoding `application/protobuf`
+//! and the message's full name as schema. Bad input is never answered on Zenoh (there is no reply
+//! path for a put): it is counted in the vehicle's health and in `uavnav_inputs_total`.
+
+use std::collections::HashMap;
+use std::hash::{Hash, Hasher};
+use std::sync::Arc;
+
+use anyhow::{Context, anyhow};
+use prost::Message;
+use tokio::sync::{broadcast, mpsc, oneshot};
+use tokio::task::JoinHandle;
+use tracing::{debug, warn};
+use uavnav_proto::v1 as pb;
+use zenoh::Session;
+use zenoh::bytes::Encoding;
+use zenoh::key_expr::KeyExpr;
+use zenoh::liveliness::LivelinessToken;
+
+use crate::config::ZenohConfig;
+use crate::hub::Hub;
+use crate::ingest::{Ingestor, Payload};
+use crate::metrics::{Kind, Outcome, Transport};
+use crate::vehicle::VehicleStats;
+
+/// Key prefix of every vehicle key.
+pub const VEHICLE_PREFIX: &str = "uavnav/v1/vehicle";
+/// Inputs of every vehicle.
+pub const INPUT_KEYS: &str = "uavnav/v1/vehicle/*/*";
+/// The latest-pose queryable.
+pub const POSE_LATEST_KEYS: &str = "uavnav/v1/vehicle/*/pose/latest";
+/// The vehicle list queryable.
+pub const VEHICLES_KEY: &str = "uavnav/v1/vehicles";
+/// Prefix of the service liveliness tokens.
+pub const SERVICE_PREFIX: &str = "uavnav/v1/service";
+
+/// Decoder shards: inputs are spread over this many tasks by vehicle id (per-vehicle order kept).
+const SHARDS: usize = 4;
+
+/// The Zenoh encoding of a uavnav.v1 message.
+pub fn encoding(full_name: &str) -> Encoding {
+    Encoding::APPLICATION_PROTOBUF.with_schema(full_name)
+}
+
+/// Builds the session configuration from ours (the JSON5 file first, then our keys on top).
+pub fn session_config(cfg: &ZenohConfig) -> anyhow::Result<zenoh::Config> {
+    let mut z = match &cfg.config_file {
+        Some(path) => zenoh::Config::from_file(path).map_err(|e| anyhow!("zenoh config {}: {e}", path.display()))?,
+        None => zenoh::Config::default(),
+    };
+    let json = |v: &[String]| serde_json_list(v);
+    let set = |z: &mut zenoh::Config, key: &str, value: String| {
+        z.insert_json5(key, &value).map_err(|e| anyhow!("zenoh config {key}={value}: {e}"))
+    };
+    set(&mut z, "mode", format!("\"{}\"", cfg.mode.as_str()))?;
+    set(&mut z, "listen/endpoints", json(&cfg.listen))?;
+    set(&mut z, "connect/endpoints", json(&cfg.connect))?;
+    set(&mut z, "scouting/multicast/enabled", cfg.multicast_scouting.to_string())?;
+    Ok(z)
+}
+
+fn serde_json_list(v: &[String]) -> String {
+    let items: Vec<String> = v.iter().map(|s| format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\""))).collect();
+    format!("[{}]", items.join(","))
+}
+
+/// The running Zenoh side of the service.
+#[derive(Debug)]
+pub struct ZenohIo {
+    session: Session,
+    tasks: Vec<JoinHandle<()>>,
+    output: Option<(JoinHandle<()>, oneshot::Sender<()>)>,
+    /// The locators the session listens on.
+    pub locators: Vec<String>,
+}
+
+impl ZenohIo {
+    /// Opens the session and starts the input, output and query tasks.
+    pub async fn start(cfg: &ZenohConfig, ingestor: Ingestor, hub: Hub) -> anyhow::Result<Self> {
+        let session = zenoh::open(session_config(cfg)?).await.map_err(|e| anyhow!("opening the zenoh session: {e}"))?;
+        let locators = session.info().locators().await.iter().map(|l| l.to_string()).collect();
+        let instance = if cfg.instance.is_empty() { default_instance() } else { cfg.instance.clone() };
+        let service_token = session
+            .liveliness()
+            .declare_token(format!("{SERVICE_PREFIX}/{instance}"))
+            .await
+            .map_err(|e| anyhow!("declaring the service liveliness token: {e}"))
+            .context("zenoh.instance must be a valid key chunk")?;
+        let mut tasks = Vec::new();
+        tasks.push(spawn_inputs(&session, ingestor.clone()).await?);
+        tasks.push(spawn_queries(&session, ingestor.clone()).await?);
+        tasks.push(spawn_liveliness(&session, hub.lifecycle.subscribe(), service_token));
+        let (done_tx, done_rx) = oneshot::channel();
+        let out = publish_outputs(session.clone(), hub.poses.subscribe(), hub.health.subscribe(), ingestor, done_rx);
+        let output = Some((tokio::spawn(out), done_tx));
+        Ok(Self { session, tasks, output, locators })
+    }
+
+    /// Stops taking input (first step of shutdown).
+    pub fn stop_inputs(&mut self) {
+        for t in self.tasks.drain(..) {
+            t.abort();
+        }
+    }
+
+    /// Publishes what is left and closes the session (after the actors have drained).
+    pub async fn close(mut self) {
+        if let Some((task, done)) = self.output.take() {
+            let _ = done.send(());
+            let _ = tokio::time::timeout(std::time::Duration::from_secs(5), task).await;
+        }
+        if let Err(e) = self.session.close().await {
+            warn!(error = %e, "closing the zenoh session");
+        }
+    }
+}
+
+fn default_instance() -> String {
+    let host = std::fs::read_to_string("/etc/hostname").map(|s| s.trim().to_string()).unwrap_or_default();
+    let host: String = host.chars().filter(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.')).collect();
+    format!("{}-{}", if host.is_empty() { "uavnavd" } else { &host }, std::process::id())
+}
+
+/// `uavnav/v1/vehicle/{id}/{leaf}` → (id, leaf).
+fn split_vehicle_key(key: &str) -> Option<(&str, &str)> {
+    let rest = key.strip_prefix(VEHICLE_PREFIX)?.strip_prefix('/')?;
+    let (id, leaf) = rest.split_once('/')?;
+    Some((id, leaf))
+}
+
+async fn spawn_inputs(session: &Session, ingestor: Ingestor) -> anyhow::Result<JoinHandle<()>> {
+    let sub = session.declare_subscriber(INPUT_KEYS).await.map_err(|e| anyhow!("subscribing to {INPUT_KEYS}: {e}"))?;
+    let max_bytes = ingestor.max_message_bytes();
+    let mut shards = Vec::with_capacity(SHARDS);
+    let mut shard_tasks = Vec::with_capacity(SHARDS);
+    for _ in 0..SHARDS {
+        let (tx, rx) = mpsc::channel::<zenoh::sample::Sample>(1024);
+        shards.push(tx);
+        shard_tasks.push(tokio::spawn(decode_loop(rx, ingestor.clone(), max_bytes)));
+    }
+    Ok(tokio::spawn(async move {
+        let _guard = AbortOnDrop(shard_tasks);
+        while let Ok(sample) = sub.recv_async().await {
+            let shard = split_vehicle_key(sample.key_expr().as_str()).map_or(0, |(id, _)| shard_of(id));
+            if shards[shard].send(sample).await.is_err() {
+                break;
+            }
+        }
+    }))
+}
+
+struct AbortOnDrop(Vec<JoinHandle<()>>);
+
+impl Drop for AbortOnDrop {
+    fn drop(&mut self) {
+        for t in &self.0 {
+            t.abort();
+        }
+    }
+}
+
+fn shard_of(id: &str) -> usize {
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    id.hash(&mut h);
+    (h.finish() % SHARDS as u64) as usize
+}
+
+async fn decode_loop(mut rx: mpsc::Receiver<zenoh::sample::Sample>, ingestor: Ingestor, max_bytes: usize) {
+    while let Some(sample) = rx.recv().await {
+        let Some((id, leaf)) = split_vehicle_key(sample.key_expr().as_str()) else { continue };
+        // Our own outputs match `*/*` too (pose, health): not inputs.
+        let kind = match leaf {
+            "imu" => Kind::Imu,
+            "gnss" => Kind::Gnss,
+            "camera" => Kind::Camera,
+            "config" => Kind::Config,
+            _ => continue,
+        };
+        let bytes = sample.payload().to_bytes();
+        if bytes.len() > max_bytes {
+            reject(&ingestor, id, kind, Outcome::Exhausted, &format!("{} bytes, limit {max_bytes}", bytes.len()));
+            continue;
+        }
+        let verdict = match kind {
+            Kind::Imu => decode::<pb::ImuBatch>(&bytes).map(|m| (ingestor.clone(), id.to_owned(), In::Imu(m))),
+            Kind::Gnss => decode::<pb::GnssFix>(&bytes).map(|m| (ingestor.clone(), id.to_owned(), In::Gnss(m))),
+            Kind::Camera => decode::<pb::CameraFrame>(&bytes).map(|m| (ingestor.clone(), id.to_owned(), In::Camera(m))),
+            _ => decode::<pb::VehicleConfig>(&bytes).map(|m| (ingestor.clone(), id.to_owned(), In::Config(m))),
+        };
+        match verdict {
+            Ok((ing, id, msg)) => {
+                let v = ing.submit(Transport::Zenoh, &id, msg.payload()).await;
+                if v.status != pb::IngestStatus::Accepted {
+                    debug!(vehicle = %id, status = ?v.status, reason = %v.reason, "zenoh input refused");
+                }
+            }
+            Err(e) => reject(&ingestor, id, kind, Outcome::Invalid, &format!("malformed protobuf: {e}")),
+        }
+    }
+}
+
+enum In {
+    Imu(pb::ImuBatch),
+    Gnss(pb::GnssFix),
+    Camera(pb::CameraFrame),
+    Config(pb::VehicleConfig),
+}
+
+impl In {
+    fn payload(&self) -> Payload<'_> {
+        match self {
+            In::Imu(m) => Payload::Imu(m),
+            In::Gnss(m) => Payload::Gnss(m),
+            In::Camera(m) => Payload::Camera(m),
+            In::Config(m) => Payload::Config(m),
+        }
+    }
+}
+
+fn decode<M: Message + Default>(bytes: &[u8]) -> Result<M, prost::DecodeError> {
+    M::decode(bytes)
+}
+
+/// Counts a refusal that never reached [`Ingestor::submit`] (undecodable or oversize).
+fn reject(ingestor: &Ingestor, id: &str, kind: Kind, outcome: Outcome, reason: &str) {
+    ingestor.registry().ctx().metrics.input(Transport::Zenoh, kind, outcome, 1);
+    if let Some(h) = ingestor.registry().get(id) {
+        VehicleStats::add(&h.shared.stats.rejected, 1);
+    }
+    debug!(vehicle = %id, ?kind, reason, "zenoh input refused");
+}
+
+async fn spawn_queries(session: &Session, ingestor: Ingestor) -> anyhow::Result<JoinHandle<()>> {
+    let poses = session.declare_queryable(POSE_LATEST_KEYS).await.map_err(|e| anyhow!("queryable {POSE_LATEST_KEYS}: {e}"))?;
+    let list = session.declare_queryable(VEHICLES_KEY).await.map_err(|e| anyhow!("queryable {VEHICLES_KEY}: {e}"))?;
+    Ok(tokio::spawn(async move {
+        loop {
+            tokio::select! {
+                q = poses.recv_async() => match q {
+                    Ok(q) => answer_pose(&q, &ingestor).await,
+                    Err(_) => break,
+                },
+                q = list.recv_async() => match q {
+                    Ok(q) => {
+                        let vehicles = ingestor.registry().list("").iter().map(crate::grpc::summary_of).collect();
+                        let body = pb::ListVehiclesResponse { vehicles }.encode_to_vec();
+                        let _ = q.reply(VEHICLES_KEY, body).encoding(encoding("uavnav.v1.ListVehiclesResponse")).await;
+                    }
+                    Err(_) => break,
+                },
+            }
+        }
+    }))
+}
+
+/// Replies with the latest pose of every vehicle the query's key expression selects.
+async fn answer_pose(q: &zenoh::query::Query, ingestor: &Ingestor) {
+    let wanted = q.key_expr().clone();
+    for h in ingestor.registry().list("") {
+        let key = format!("{VEHICLE_PREFIX}/{}/pose/latest", h.shared.id);
+        let Ok(ke) = KeyExpr::try_from(key.as_str()) else { continue };
+        if !wanted.intersects(&ke) {
+            continue;
+        }
+        if let Some(p) = h.shared.pose() {
+            let _ = q.reply(ke, p.encode_to_vec()).encoding(encoding("uavnav.v1.PoseEstimate")).await;
+        }
+    }
+}
+
+fn spawn_liveliness(session: &Session, mut rx: broadcast::Receiver<(Arc<str>, bool)>, service: LivelinessToken) -> JoinHandle<()> {
+    let session = session.clone();
+    tokio::spawn(async move {
+        let _service = service;
+        let mut tokens: HashMap<Arc<str>, LivelinessToken> = HashMap::new();
+        loop {
+            match rx.recv().await {
+                Ok((id, true)) => {
+                    match session.liveliness().declare_token(format!("{VEHICLE_PREFIX}/{id}/alive")).await {
+                        Ok(t) => {
+                            tokens.insert(id, t);
+                        }
+                        Err(e) => warn!(vehicle = %id, error = %e, "declaring the vehicle liveliness token"),
+                    }
+                }
+                Ok((id, false)) => {
+                    tokens.remove(&id);
+                }
+                Err(broadcast::error::RecvError::Lagged(_)) => continue,
+                Err(broadcast::error::RecvError::Closed) => break,
+            }
+        }
+    })
+}
+
+/// Publishes every pose and health report on the vehicle's key until `done` fires, then publishes
+/// what is left in the rings (the final health reports) and ends.
+async fn publish_outputs(
+    session: Session,
+    mut poses: broadcast::Receiver<Arc<pb::PoseEstimate>>,
+    mut health: broadcast::Receiver<Arc<pb::VehicleHealth>>,
+    ingestor: Ingestor,
+    mut done: oneshot::Receiver<()>,
+) {
+    let metrics = ingestor.registry().ctx().metrics.clone();
+    let out = Outputs { session, pose_enc: encoding("uavnav.v1.PoseEstimate"), health_enc: encoding("uavnav.v1.VehicleHealth") };
+    loop {
+        tokio::select! {
+            biased;
+            r = health.recv() => match r {
+                Ok(h) => out.health(&h).await,
+                Err(broadcast::error::RecvError::Lagged(n)) => metrics.zenoh_output_lagged.inc_by(n),
+                Err(broadcast::error::RecvError::Closed) => break,
+            },
+            r = poses.recv() => match r {
+                Ok(p) => out.pose(&p).await,
+                Err(broadcast::error::RecvError::Lagged(n)) => metrics.zenoh_output_lagged.inc_by(n),
+                Err(broadcast::error::RecvError::Closed) => break,
+            },
+            _ = &mut done => break,
+        }
+    }
+    while let Ok(p) = poses.try_recv() {
+        out.pose(&p).await;
+    }
+    while let Ok(h) = health.try_recv() {
+        out.health(&h).await;
+    }
+}
+
+struct Outputs {
+    session: Session,
+    pose_enc: Encoding,
+    health_enc: Encoding,
+}
+
+impl Outputs {
+    async fn pose(&self, p: &pb::PoseEstimate) {
+        self.put(format!("{VEHICLE_PREFIX}/{}/pose", p.vehicle_id), p.encode_to_vec(), &self.pose_enc).await;
+    }
+
+    async fn health(&self, h: &pb::VehicleHealth) {
+        self.put(format!("{VEHICLE_PREFIX}/{}/health", h.vehicle_id), h.encode_to_vec(), &self.health_enc).await;
+    }
+
+    async fn put(&self, key: String, body: Vec<u8>, enc: &Encoding) {
+        if let Err(e) = self.session.put(&key, body).encoding(enc.clone()).await {
+            debug!(key, error = %e, "zenoh put failed");
+        }
+    }
+}

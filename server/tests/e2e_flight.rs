@@ -1,0 +1,148 @@
+//! End to end: a simulated flight streamed into the service over gRPC, and over Zenoh, gives
+//! exactly the poses of the offline runner (`push_inline`, what `uavnav estimate` does) on the same
+//! data: the actor's ordering, the vision pool and the transports change nothing.
+
+mod common;
+
+use std::time::Duration;
+
+use common::test_config;
+use prost::Message;
+use uavnav_core::SensorEvent;
+use uavnav_proto::v1 as pb;
+use uavnav_runner::{RunnerParams, VehicleRunner};
+use uavnavd::Server;
+use uavnavd::runner_engine::pose_to_wire;
+
+/// The first `seconds` of the smoke flight, every sensor, in time order.
+fn flight(seconds: f64) -> (uavnav_core::VehicleConfig, Vec<SensorEvent>) {
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios/smoke.toml")).unwrap();
+    let scenario = uavnav_sim::scenario::Scenario::from_toml_str(&text).unwrap();
+    let flight = uavnav_sim::flight::Flight::new(&scenario).unwrap();
+    let mut events = Vec::new();
+    let mut t_end = None;
+    for e in flight.events() {
+        let e = e.unwrap();
+        let end = *t_end.get_or_insert(e.t_ns() + (seconds * 1e9) as i64);
+        if e.t_ns() > end {
+            break;
+        }
+        events.push(e);
+    }
+    (flight.vehicle_config(), events)
+}
+
+fn offline(config: &uavnav_core::VehicleConfig, events: &[SensorEvent]) -> Vec<pb::PoseEstimate> {
+    let mut runner = VehicleRunner::new(config.clone(), RunnerParams::default(), None);
+    let mut poses = Vec::new();
+    for e in events {
+        if let Ok(p) = runner.push_inline(e.clone()) {
+            poses.extend(p.iter().map(pose_to_wire));
+        }
+    }
+    poses
+}
+
+fn envelope(id: &str, seq: u64, e: &SensorEvent) -> pb::SensorEnvelope {
+    use pb::sensor_envelope::Payload as P;
+    let payload = match e {
+        SensorEvent::Imu(s) => P::Imu(pb::ImuBatch { samples: vec![s.into()] }),
+        SensorEvent::Gnss(f) => P::Gnss(f.into()),
+        SensorEvent::Camera(c) => P::Camera(c.into()),
+    };
+    pb::SensorEnvelope { vehicle_id: id.into(), sequence: seq, payload: Some(payload) }
+}
+
+fn strip(mut p: pb::PoseEstimate) -> pb::PoseEstimate {
+    p.vehicle_id.clear();
+    p.ingest_wall_ns = 0;
+    p
+}
+
+async fn collect(
+    rx: &mut tokio::sync::broadcast::Receiver<std::sync::Arc<pb::PoseEstimate>>,
+    n: usize,
+) -> Vec<pb::PoseEstimate> {
+    let mut got = Vec::with_capacity(n);
+    let all = async {
+        while got.len() < n {
+            got.push(strip((*rx.recv().await.unwrap()).clone()));
+        }
+    };
+    tokio::time::timeout(Duration::from_secs(60), all).await.expect("all poses within 60 s");
+    got
+}
+
+fn assert_same(got: &[pb::PoseEstimate], want: &[pb::PoseEstimate]) {
+    assert_eq!(got.len(), want.len());
+    for (i, (g, w)) in got.iter().zip(want).enumerate() {
+        assert_eq!(g, w, "pose {i} differs");
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn grpc_flight_equals_offline_estimate() {
+    let (config, events) = flight(4.0);
+    let want = offline(&config, &events);
+    assert!(want.len() > 500, "the offline run produced {} poses", want.len());
+
+    let server = Server::start(test_config()).await.unwrap();
+    let mut rx = server.registry().ctx().hub.poses.subscribe();
+    let mut c = common::client(&server).await;
+    c.configure_vehicle(pb::ConfigureVehicleRequest { vehicle_id: "e2e".into(), config: Some((&config).into()) })
+        .await
+        .unwrap();
+    let envs: Vec<_> = events.iter().enumerate().map(|(i, e)| envelope("e2e", i as u64, e)).collect();
+    let n = envs.len();
+    let mut acks = c.ingest(futures::stream::iter(envs)).await.unwrap().into_inner();
+    let mut accepted = 0;
+    while let Some(a) = acks.message().await.unwrap() {
+        assert_eq!(a.status, pb::IngestStatus::Accepted as i32, "{a:?}");
+        accepted += 1;
+        if accepted == n {
+            break;
+        }
+    }
+    let got = collect(&mut rx, want.len()).await;
+    assert_same(&got, &want);
+    server.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn zenoh_flight_equals_offline_estimate() {
+    let (config, events) = flight(2.0);
+    let want = offline(&config, &events);
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let mut cfg = test_config();
+    cfg.zenoh.enabled = true;
+    cfg.zenoh.listen = vec![endpoint.clone()];
+    cfg.zenoh.instance = format!("e2e-{port}");
+    let server = Server::start(cfg).await.unwrap();
+    let mut rx = server.registry().ctx().hub.poses.subscribe();
+
+    let mut zc = zenoh::Config::default();
+    zc.insert_json5("mode", "\"peer\"").unwrap();
+    zc.insert_json5("listen/endpoints", "[]").unwrap();
+    zc.insert_json5("connect/endpoints", &format!("[\"{endpoint}\"]")).unwrap();
+    zc.insert_json5("scouting/multicast/enabled", "false").unwrap();
+    let z = zenoh::open(zc).await.unwrap();
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let key = |leaf: &str| format!("uavnav/v1/vehicle/ze2e/{leaf}");
+    let enc = uavnavd::zenoh_io::encoding;
+    let block = zenoh::qos::CongestionControl::Block;
+    let cfg_msg = pb::VehicleConfig::from(&config);
+    z.put(key("config"), cfg_msg.encode_to_vec()).encoding(enc("uavnav.v1.VehicleConfig")).congestion_control(block).await.unwrap();
+    for e in &events {
+        let (leaf, body, name) = match e {
+            SensorEvent::Imu(s) => ("imu", pb::ImuBatch { samples: vec![s.into()] }.encode_to_vec(), "uavnav.v1.ImuBatch"),
+            SensorEvent::Gnss(f) => ("gnss", pb::GnssFix::from(f).encode_to_vec(), "uavnav.v1.GnssFix"),
+            SensorEvent::Camera(f) => ("camera", pb::CameraFrame::from(f).encode_to_vec(), "uavnav.v1.CameraFrame"),
+        };
+        z.put(key(leaf), body).encoding(enc(name)).congestion_control(block).await.unwrap();
+    }
+    let got = collect(&mut rx, want.len()).await;
+    assert_same(&got, &want);
+    z.close().await.unwrap();
+    server.shutdown().await.unwrap();
+}
