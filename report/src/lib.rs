@@ -1,0 +1,151 @@
+//! # uavnav-report
+//!
+//! The accuracy report of `uavnav estimate --report DIR`: given one or more runs of the
+//! estimator over a dataset with truth, [`write_report`] writes into `DIR`
+//!
+//! | file | content |
+//! |---|---|
+//! | `accuracy.json` | one object per run: the estimator's `AccuracyReport` plus run metadata |
+//! | `accuracy.md` | the same as a Markdown table, the outage windows and the figures |
+//! | `attitude.png` | roll, pitch, yaw against truth (the paper's Figs. 2–3) |
+//! | `attitude_error.png` | roll, pitch, yaw errors with the stated ±3σ |
+//! | `velocity_ned.png` | north, east, down velocity against truth (Fig. 4) |
+//! | `position_down.png` | down position against truth, zoomed on each outage (Fig. 5) |
+//! | `horizontal_error.png` | horizontal position error with the stated 3σ |
+//!
+//! Time axes are seconds since the first output; GNSS outages are shaded grey.
+//!
+//! | module | what it holds |
+//! |---|---|
+//! | [`outages`] | [`gnss_outages`]: outage windows derived from the GNSS fix times |
+//! | [`tables`] | `accuracy.json` and `accuracy.md` |
+//! | [`figures`] | plot-ready series and the panels of each figure |
+//! | [`plot`] | the stacked-panel PNG renderer (embedded font, no system fonts) |
+//! | [`series`] | time base, yaw unwrapping, decimation, axis ranges, clipping |
+//! | [`error`] | [`ReportError`] |
+
+pub mod error;
+pub mod figures;
+pub mod outages;
+pub mod plot;
+pub mod series;
+pub mod tables;
+
+use std::path::{Path, PathBuf};
+
+use uavnav_core::TruthSample;
+use uavnav_estimator::PoseOutput;
+use uavnav_estimator::accuracy::AccuracyReport;
+
+pub use error::ReportError;
+pub use outages::{DEFAULT_MIN_GAP_NS, gnss_outages};
+pub use plot::PlotParams;
+
+/// One estimator run to report on.
+#[derive(Debug, Clone)]
+pub struct Run<'a> {
+    /// Legend and table label, e.g. `"eskf, IMU+GNSS+video"`.
+    pub label: String,
+    /// Its outputs, in time order.
+    pub outputs: &'a [PoseOutput],
+}
+
+/// What [`write_report`] computed and wrote.
+#[derive(Debug, Clone)]
+pub struct ReportSummary {
+    /// The accuracy figures, one per run, in run order.
+    pub reports: Vec<AccuracyReport>,
+    /// Every file written, in writing order.
+    pub files: Vec<PathBuf>,
+}
+
+/// The PNGs, with the captions used in `accuracy.md`.
+const FIGURES: [(&str, &str); 5] = [
+    ("attitude.png", "Roll, pitch and yaw against truth"),
+    ("attitude_error.png", "Attitude errors with the stated ±3σ"),
+    ("velocity_ned.png", "NED velocity against truth"),
+    (
+        "position_down.png",
+        "Down position against truth, zoom on the GNSS outages",
+    ),
+    (
+        "horizontal_error.png",
+        "Horizontal position error with the stated 3σ",
+    ),
+];
+
+/// Writes the report of `runs` against `truth` (sorted by time) into `dir` (created if needed),
+/// with `outages` as `[start, end)` windows in ns (e.g. from [`gnss_outages`]).
+pub fn write_report(
+    dir: &Path,
+    runs: &[Run],
+    truth: &[TruthSample],
+    outages: &[(i64, i64)],
+) -> Result<ReportSummary, ReportError> {
+    write_report_with(dir, runs, truth, outages, &PlotParams::default())
+}
+
+/// [`write_report`] with explicit plot size and density.
+pub fn write_report_with(
+    dir: &Path,
+    runs: &[Run],
+    truth: &[TruthSample],
+    outages: &[(i64, i64)],
+    params: &PlotParams,
+) -> Result<ReportSummary, ReportError> {
+    if truth.is_empty() {
+        return Err(ReportError::Empty("no truth samples"));
+    }
+    let t0_ns = runs
+        .iter()
+        .filter_map(|r| r.outputs.first())
+        .map(|o| o.t_ns)
+        .min();
+    let t_end_ns = runs
+        .iter()
+        .filter_map(|r| r.outputs.last())
+        .map(|o| o.t_ns)
+        .max();
+    let (Some(t0_ns), Some(t_end_ns)) = (t0_ns, t_end_ns) else {
+        return Err(ReportError::Empty("no run with outputs"));
+    };
+    std::fs::create_dir_all(dir).map_err(|source| ReportError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+
+    let reports: Vec<AccuracyReport> = runs
+        .iter()
+        .map(|r| AccuracyReport::compute(&r.label, r.outputs, truth, outages))
+        .collect();
+    let outputs: Vec<&[PoseOutput]> = runs.iter().map(|r| r.outputs).collect();
+    let mut files = Vec::new();
+    let json = tables::accuracy_json(&reports, &outputs, outages)?;
+    files.push(write_text(dir, "accuracy.json", &json)?);
+    let md = tables::accuracy_markdown(&reports, outages, t0_ns, &FIGURES);
+    files.push(write_text(dir, "accuracy.md", &md)?);
+
+    let data = figures::FigureData::new(runs, truth, outages, t0_ns, t_end_ns);
+    let panels = [
+        data.attitude(),
+        data.attitude_error(),
+        data.velocity(),
+        data.position_down(),
+        data.horizontal_error(),
+    ];
+    for ((file, _), panels) in FIGURES.iter().zip(panels) {
+        let path = dir.join(file);
+        plot::render(&path, &panels, params)?;
+        files.push(path);
+    }
+    Ok(ReportSummary { reports, files })
+}
+
+fn write_text(dir: &Path, name: &str, text: &str) -> Result<PathBuf, ReportError> {
+    let path = dir.join(name);
+    std::fs::write(&path, text).map_err(|source| ReportError::Io {
+        path: path.clone(),
+        source,
+    })?;
+    Ok(path)
+}
