@@ -55,6 +55,7 @@ pub struct Eskf {
     out: OutputPredictor,
     late_dropped: u64,
     corrected: bool,
+    lla: Option<crate::output::LlaLinearizer>,
 }
 
 /// Linear interpolation of two IMU samples at `t_ns`.
@@ -107,6 +108,7 @@ impl Eskf {
             out: OutputPredictor::new(),
             late_dropped: 0,
             corrected: false,
+            lla: None,
             params,
         };
         if let Some(o) = origin {
@@ -139,6 +141,7 @@ impl Eskf {
             out: OutputPredictor::new(),
             late_dropped: 0,
             corrected: false,
+            lla: None,
             params: self.params.clone(),
         };
         *self = fresh;
@@ -504,9 +507,14 @@ impl Eskf {
         }
     }
 
-    fn output(&self) -> Option<PoseOutput> {
+    fn output(&mut self) -> Option<PoseOutput> {
+        let frame = *self.frame.as_ref()?;
+        let p_out = self.out.x.as_ref()?.p;
+        let lla = self
+            .lla
+            .get_or_insert_with(|| crate::output::LlaLinearizer::new(frame, &p_out))
+            .lla(&p_out);
         let o = self.out.x.as_ref()?;
-        let frame = self.frame.as_ref()?;
         let x = self.x.as_ref()?;
         let to = self.params.aid_timeout_ns;
         let d = |i: usize| {
@@ -521,7 +529,7 @@ impl Eskf {
         let (r, p_, y) = o.q.euler_angles();
         Some(PoseOutput {
             t_ns: o.t_ns,
-            lla: frame.ned_to_lla(&o.p),
+            lla,
             pos_ned_m: o.p,
             vel_ned_mps: o.v,
             nav_from_body: o.q,

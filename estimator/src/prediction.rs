@@ -110,27 +110,61 @@ impl ErrorDynamics {
         Cov::identity() + a * dt_s
     }
 
-    /// `A · M` exploiting the sparsity of `A`.
-    fn a_times(&self, m: &Cov) -> Cov {
-        let mut out = Cov::zeros();
-        out.fixed_rows_mut::<3>(IP)
-            .copy_from(&m.fixed_rows::<3>(IV));
-        let rv = self.a_v_th * m.fixed_rows::<3>(ITH)
-            - self.c * m.fixed_rows::<3>(IBA)
-            - 2.0 * self.w_ie_x * m.fixed_rows::<3>(IV);
-        out.fixed_rows_mut::<3>(IV).copy_from(&rv);
-        let rth = -self.w_ie_x * m.fixed_rows::<3>(ITH) - self.c * m.fixed_rows::<3>(IBG);
-        out.fixed_rows_mut::<3>(ITH).copy_from(&rth);
-        out.fixed_rows_mut::<3>(IGM)
-            .copy_from(&(m.fixed_rows::<3>(IGM) * -self.inv_tau));
-        out
-    }
-
-    /// `P ← F P Fᵀ + Q dt` with `F = I + A dt`, computed as `M = P + dt·A P`, `P' = M + dt·(A Mᵀ)ᵀ`.
+    /// `P ← F P Fᵀ + Q dt` with `F = I + A dt`, in place: `M = P + dt·A P` touches only the 12
+    /// rows where `A` is non-zero, `P' = M + dt·M Aᵀ` only the same 12 columns (3×24 blocks, no
+    /// 24×24 products).
     pub fn propagate(&self, p: &mut Cov, dt_s: f64, q: &ProcessNoise) {
-        let m = *p + self.a_times(p) * dt_s;
-        let mt = m.transpose();
-        *p = m + self.a_times(&mt).transpose() * dt_s;
+        let (avth, c, wx, k) = (
+            self.a_v_th * dt_s,
+            self.c * dt_s,
+            self.w_ie_x * dt_s,
+            self.inv_tau * dt_s,
+        );
+        let d_p = p.fixed_rows::<3>(IV) * dt_s;
+        let d_v = avth * p.fixed_rows::<3>(ITH)
+            - c * p.fixed_rows::<3>(IBA)
+            - 2.0 * wx * p.fixed_rows::<3>(IV);
+        let d_th = -wx * p.fixed_rows::<3>(ITH) - c * p.fixed_rows::<3>(IBG);
+        let d_gm = p.fixed_rows::<3>(IGM) * -k;
+        {
+            let mut blk = p.fixed_rows_mut::<3>(IP);
+            blk += &d_p;
+        }
+        {
+            let mut blk = p.fixed_rows_mut::<3>(IV);
+            blk += &d_v;
+        }
+        {
+            let mut blk = p.fixed_rows_mut::<3>(ITH);
+            blk += &d_th;
+        }
+        {
+            let mut blk = p.fixed_rows_mut::<3>(IGM);
+            blk += &d_gm;
+        }
+        let e_p = p.fixed_columns::<3>(IV) * dt_s;
+        let e_v = p.fixed_columns::<3>(ITH) * avth.transpose()
+            - p.fixed_columns::<3>(IBA) * c.transpose()
+            - 2.0 * p.fixed_columns::<3>(IV) * wx.transpose();
+        let e_th =
+            -p.fixed_columns::<3>(ITH) * wx.transpose() - p.fixed_columns::<3>(IBG) * c.transpose();
+        let e_gm = p.fixed_columns::<3>(IGM) * -k;
+        {
+            let mut blk = p.fixed_columns_mut::<3>(IP);
+            blk += &e_p;
+        }
+        {
+            let mut blk = p.fixed_columns_mut::<3>(IV);
+            blk += &e_v;
+        }
+        {
+            let mut blk = p.fixed_columns_mut::<3>(ITH);
+            blk += &e_th;
+        }
+        {
+            let mut blk = p.fixed_columns_mut::<3>(IGM);
+            blk += &e_gm;
+        }
         add_process_noise(p, dt_s, q);
         symmetrize(p);
     }

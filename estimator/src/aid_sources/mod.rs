@@ -61,6 +61,18 @@ pub fn chi2_gate(dof: usize, z: f64) -> f64 {
     k * (1.0 - c + z * c.sqrt()).powi(3)
 }
 
+/// `P Hᵀ` skipping the all-zero 3-column blocks of `H` (measurement Jacobians touch 2–4 of 8).
+pub fn p_ht<const M: usize>(p: &Cov, h: &SMatrix<f64, M, N>) -> SMatrix<f64, N, M> {
+    let mut out = SMatrix::<f64, N, M>::zeros();
+    for b in 0..N / 3 {
+        let hb = h.fixed_columns::<3>(3 * b);
+        if hb.iter().any(|x| *x != 0.0) {
+            out += p.fixed_columns::<3>(3 * b) * hb.transpose();
+        }
+    }
+    out
+}
+
 /// Outcome of a gated update.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum UpdateOutcome {
@@ -86,7 +98,7 @@ pub fn gated_update<const M: usize>(
     force: bool,
     diag: &mut InnovDiag,
 ) -> UpdateOutcome {
-    let pht: SMatrix<f64, N, M> = *p * h.transpose();
+    let pht = p_ht(p, h);
     let s = h * pht + r;
     let Some(chol) = s.cholesky() else {
         return UpdateOutcome::Singular;

@@ -1,0 +1,73 @@
+//! Golden-output regression on a short flight (the 20 s smoke scenario, fixed seeds, oracle
+//! vision): the final pose and a sum over all outputs must not change unnoticed. If a deliberate
+//! change moves them, re-run with `--nocapture`, check the accuracy is no worse, update the numbers.
+
+mod common;
+
+use common::{Oracle, RunCfg, run, scenario};
+use uavnav_core::FilterProfile;
+use uavnav_sim::Flight;
+
+/// (profile, final N, E, D m, final roll, pitch, yaw rad, Σ over outputs of |p|, m)
+const GOLDEN: [(FilterProfile, [f64; 7]); 2] = [
+    (
+        FilterProfile::Eskf,
+        [
+            124.61658817443089,
+            493.54501934408046,
+            -13.440850722937487,
+            -0.0026397310024357436,
+            0.03475823926436442,
+            1.7637531236854036,
+            1055538.544367131,
+        ],
+    ),
+    (
+        FilterProfile::Paper,
+        [
+            127.20118723474518,
+            493.85860692426337,
+            -13.99727051507512,
+            -0.007693878410006683,
+            0.03569450342470852,
+            1.767665701797263,
+            1057949.0258864607,
+        ],
+    ),
+];
+
+#[test]
+fn smoke_flight_golden_output() {
+    let s = scenario("smoke", None);
+    let flight = Flight::new(&s).unwrap();
+    let mut failures = vec![];
+    for (profile, want) in GOLDEN {
+        let outs = run(
+            &flight,
+            &RunCfg::new(profile, true, Some(Oracle::default())),
+        );
+        let last = outs.last().unwrap();
+        let sum: f64 = outs.iter().map(|o| o.pos_ned_m.norm()).sum();
+        let got = [
+            last.pos_ned_m.x,
+            last.pos_ned_m.y,
+            last.pos_ned_m.z,
+            last.euler_rad.x,
+            last.euler_rad.y,
+            last.euler_rad.z,
+            sum,
+        ];
+        eprintln!("{profile:?}: {got:?} ({} outputs)", outs.len());
+        for (k, (g, w)) in got.iter().zip(want.iter()).enumerate() {
+            let tol = if k == 6 {
+                1e-6 * w.abs().max(1.0)
+            } else {
+                1e-6
+            };
+            if (g - w).abs() > tol {
+                failures.push(format!("{profile:?} value {k}: got {g} want {w}"));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
