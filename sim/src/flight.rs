@@ -6,9 +6,15 @@ use uavnav_core::{
     LocalFrame, TruthSample, VehicleConfig,
 };
 
+use std::sync::{Arc, OnceLock};
+
+use uavnav_core::rng::Rng;
+
+use crate::render::RayTable;
 use crate::scenario::Scenario;
 use crate::sensors::{ImuErrors, grid_indices, ideal_imu, simulate_gnss};
 use crate::strapdown::earth_rate_ned;
+use crate::terrain::Terrain;
 use crate::trajectory::Trajectory;
 
 /// Lowest height above the terrain a scenario may fly, m.
@@ -47,6 +53,12 @@ pub struct Flight {
     pub(crate) camera_times_ns: Vec<i64>,
     /// Truth index of each camera frame.
     pub(crate) camera_truth_index: Vec<usize>,
+    /// The ground.
+    pub(crate) terrain: Terrain,
+    /// The camera's undistorted rays, built on the first render.
+    pub(crate) rays: OnceLock<Arc<RayTable>>,
+    /// Seed of the image-noise streams.
+    pub(crate) image_seed: u64,
 }
 
 impl Flight {
@@ -119,6 +131,9 @@ impl Flight {
             gnss,
             camera_times_ns,
             camera_truth_index,
+            terrain: Terrain::new(origin, s.terrain.elevation_m, s.seed),
+            rays: OnceLock::new(),
+            image_seed: Rng::derive(s.seed, "image").next_u64(),
         })
     }
 
@@ -200,6 +215,11 @@ impl Flight {
     /// Camera frame times (on the IMU grid), ns.
     pub fn camera_times_ns(&self) -> &[i64] {
         &self.camera_times_ns
+    }
+
+    /// The ground.
+    pub fn terrain(&self) -> &Terrain {
+        &self.terrain
     }
 
     /// Truth at camera frame `index`, if it exists.

@@ -11,6 +11,9 @@
 //! | [`sensors`] | ideal IMU, IMU error model, GNSS receiver model (lever arm, Gauss–Markov, outages) |
 //! | [`strapdown`] | a reference strapdown integrator (proves truth and IMU agree) |
 //! | [`flight`] | [`Flight`]: the precomputed flight and its accessors |
+//! | [`events`] | camera frames of a flight and its merged, time-ordered [`SensorEvent`](uavnav_core::SensorEvent) stream |
+//! | [`terrain`] | the procedural, anti-aliased ground texture |
+//! | [`render`] | ray casting the terrain ellipsoid, pixel noise, JPEG encoding |
 //!
 //! ## Physics contract (the estimator implements the same model)
 //!
@@ -32,11 +35,16 @@
 //! - Random streams: `Rng::derive(seed, "imu")`, `"gnss"`, `"terrain"`, `"image"`: adding or
 //!   changing one sensor never changes another's noise.
 
+pub mod events;
 pub mod flight;
+pub mod render;
 pub mod scenario;
 pub mod sensors;
 pub mod strapdown;
+pub mod terrain;
 pub mod trajectory;
 
 pub use flight::{Flight, SimError};
+pub use render::{PixelNoise, RayTable, encode_jpeg, render_gray};
 pub use scenario::{Scenario, ScenarioError};
+pub use terrain::Terrain;
