@@ -95,8 +95,8 @@ fn truth_series(truth: &[TruthSample], t0_ns: i64, t_end_ns: i64) -> TruthSeries
     let mut out = TruthSeries::default();
     for (i, s) in window.iter().enumerate() {
         let angles = [euler[i].x, euler[i].y, yaw[i]];
-        for k in 0..3 {
-            out.att_deg[k].push((t[i], angles[k].to_degrees()));
+        for (k, angle) in angles.iter().enumerate() {
+            out.att_deg[k].push((t[i], angle.to_degrees()));
             out.vel_mps[k].push((t[i], s.vel_ned_mps[k]));
         }
         out.down_m.push((t[i], s.pos_ned_m.z));
@@ -137,8 +137,8 @@ fn run_series(
     for (i, o) in outs.iter().enumerate() {
         let t = seconds_since(t0_ns, o.t_ns);
         let angles = [o.euler_rad.x, o.euler_rad.y, yaw[i]];
-        for k in 0..3 {
-            s.att_deg[k].push((t, angles[k].to_degrees()));
+        for (k, angle) in angles.iter().enumerate() {
+            s.att_deg[k].push((t, angle.to_degrees()));
             s.vel_mps[k].push((t, o.vel_ned_mps[k]));
         }
         s.down_m.push((t, o.pos_ned_m.z));
@@ -249,9 +249,13 @@ impl FigureData {
         (0..3)
             .map(|k| {
                 let mut lines = Vec::new();
-                let mut y = None;
+                let (mut y, mut sigma) = (None, None);
                 for r in &self.runs {
                     y = Range::union(y, Range::of(settled(&r.att_err_deg[k], self.settle_s)));
+                    sigma = Range::union(
+                        sigma,
+                        Range::of(settled(&r.att_3sigma_deg[k], self.settle_s)),
+                    );
                     lines.push(Line {
                         label: Some(r.label.clone()),
                         color: r.color,
@@ -272,7 +276,10 @@ impl FigureData {
                         });
                     }
                 }
-                let m = fallback(y).lo.abs().max(fallback(y).hi.abs()).max(1e-3) * 1.25;
+                // scaled on the errors; the 3σ bounds join the axis unless they dwarf the errors
+                let err = fallback(y).lo.abs().max(fallback(y).hi.abs()).max(1e-3);
+                let bound = sigma.map_or(0.0, |r| r.hi).min(4.0 * err);
+                let m = err.max(bound) * 1.25;
                 Panel {
                     title: format!(
                         "{} (estimate − truth; axis scaled after {:.0} s)",

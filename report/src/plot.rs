@@ -8,7 +8,7 @@ use plotters::prelude::*;
 use plotters::style::{FontStyle, register_font};
 
 use crate::error::ReportError;
-use crate::series::{Range, decimate, visible_segments};
+use crate::series::{Range, decimate, in_time, visible_segments};
 
 /// The font family name the panels ask for.
 const FONT: &str = "sans-serif";
@@ -154,7 +154,7 @@ fn draw_panel<'a>(area: &Area<'a>, panel: &Panel, params: &PlotParams) -> DrawRe
         draw_legend_entry(&mut chart, line)?;
     }
     for line in panel.lines.iter().rev() {
-        draw_line(&mut chart, line, panel.y, params.max_points)?;
+        draw_line(&mut chart, line, panel.x, panel.y, params.max_points)?;
     }
     if panel.legend {
         chart
@@ -197,12 +197,15 @@ fn draw_legend_entry<'a>(chart: &mut Chart<'a, '_>, line: &Line) -> DrawResult<'
 fn draw_line<'a>(
     chart: &mut Chart<'a, '_>,
     line: &Line,
+    x: Range,
     y: Range,
     max_points: usize,
 ) -> DrawResult<'a> {
-    let points = decimate(&line.points, max_points);
+    // crop to the shown time first, so a zoom keeps its full resolution
+    let shown: Vec<(f64, f64)> = in_time(&line.points, x).copied().collect();
+    let points = decimate(&shown, max_points);
     let style = line.color.stroke_width(line.width);
-    for seg in visible_segments(&points, y) {
+    for seg in visible_segments(&points, x, y) {
         if line.dashed {
             chart.draw_series(DashedLineSeries::new(seg, 6, 4, style))?;
         } else {

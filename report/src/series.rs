@@ -118,14 +118,14 @@ impl Range {
     }
 }
 
-/// Splits a polyline into the runs of consecutive points whose y is finite and inside `y`
-/// (the plotting library does not clip lines to the chart area, so out-of-range stretches are
-/// left as gaps instead of being drawn over the axes).
-pub fn visible_segments(points: &[(f64, f64)], y: Range) -> Vec<Vec<(f64, f64)>> {
+/// Splits a polyline into the runs of consecutive points that are finite and inside the
+/// `x` × `y` box (the plotting library does not clip lines to the chart area, so out-of-range
+/// stretches are left as gaps instead of being drawn over the axes).
+pub fn visible_segments(points: &[(f64, f64)], x: Range, y: Range) -> Vec<Vec<(f64, f64)>> {
     let mut segments = Vec::new();
     let mut current = Vec::new();
     for &(t, v) in points {
-        if v.is_finite() && t.is_finite() && y.contains(v) {
+        if x.contains(t) && y.contains(v) {
             current.push((t, v));
         } else if !current.is_empty() {
             segments.push(std::mem::take(&mut current));
@@ -143,6 +143,7 @@ pub fn in_time(points: &[(f64, f64)], x: Range) -> impl Iterator<Item = &(f64, f
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
     use std::f64::consts::PI;
@@ -183,11 +184,12 @@ mod tests {
             (3.0, f64::NAN),
             (4.0, 0.2),
         ];
-        let s = visible_segments(&p, Range { lo: -1.0, hi: 1.0 });
-        assert_eq!(
-            s,
-            vec![vec![(0.0, 0.0)], vec![(2.0, 0.5)], vec![(4.0, 0.2)]]
-        );
+        let y = Range { lo: -1.0, hi: 1.0 };
+        let s = visible_segments(&p, Range { lo: 0.0, hi: 10.0 }, y);
+        let expected = vec![vec![(0.0, 0.0)], vec![(2.0, 0.5)], vec![(4.0, 0.2)]];
+        assert_eq!(s, expected);
+        let s = visible_segments(&p, Range { lo: 1.0, hi: 3.0 }, y);
+        assert_eq!(s, vec![vec![(2.0, 0.5)]]);
     }
 
     #[test]

@@ -1,6 +1,8 @@
 //! Writes a report for a synthetic flight (a turn through north, a GNSS outage, two runs with
 //! known errors) and checks the files, the figures in the JSON, and that the PNGs decode.
 
+#![allow(clippy::unwrap_used)]
+
 use std::path::Path;
 
 use nalgebra::Vector3;
