@@ -4,6 +4,8 @@
 //! encoded as JPEG (quality 90). The front end runs the frames back and forth (so the sequence
 //! never jumps) with the IMU/terrain prior of each pair. Also prints the per-stage medians.
 
+#![allow(clippy::unwrap_used)]
+
 use std::time::Instant;
 
 use criterion::{Criterion, criterion_group, criterion_main};

@@ -135,6 +135,7 @@ fn ends_with_eoi(data: &[u8]) -> bool {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

@@ -163,7 +163,7 @@ impl Default for VisionParams {
             blur_sharpness: 0.02,
             blur_relative: 0.6,
             solve: SolveParams::default(),
-            seed: 0x5EED_0F_u64,
+            seed: 0x005E_ED0F_u64,
         }
     }
 }

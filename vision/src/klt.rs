@@ -49,6 +49,7 @@ pub type Affine = Option<[f32; 4]>;
 /// `p0` is the point in `prev` (level-0 px), `guess` its predicted position in `next`; the
 /// search starts at `top_level` (≤ pyramid depth − 1) from the guess. Returns the tracked
 /// position or `None` (left the image, flat window, or singular system).
+#[allow(clippy::too_many_arguments)] // the tracker's inputs are all distinct
 pub fn track_point(
     prev: &Pyramid,
     next: &Pyramid,
@@ -249,6 +250,7 @@ pub fn best_corner_in(
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
     use crate::synthetic::{Texture, render_affine};

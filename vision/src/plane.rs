@@ -98,6 +98,7 @@ pub struct PlaneFit {
 /// Gauss–Newton over `(δθ, t, δn)` on the inliers' transfer errors, with the normal tied to its
 /// prior by `normal_sigma_rad`. `sigma_floor` bounds the residual scale used in the covariance
 /// from below (normalized units).
+#[allow(clippy::too_many_arguments)] // geometry, prior, data and settings
 pub fn refine_plane(
     r: &Matrix3<f64>,
     t: &Vector3<f64>,

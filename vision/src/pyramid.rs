@@ -156,6 +156,7 @@ fn mean_abs_diff(img: &GrayF32, step: usize) -> f32 {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

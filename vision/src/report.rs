@@ -158,6 +158,7 @@ impl fmt::Display for ErrorStats {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
     use crate::frontend::{NoMeasurement, StageTimings};

@@ -191,11 +191,11 @@ pub fn ransac_essential(
     let mut k = 0;
     while k < iters {
         sample_distinct(rng, n, &mut eight);
-        if let Some(ep) = eight_point(x0, x1, &eight) {
-            if consider(ep.essential(), &mut best, scratch) {
-                let w = best.as_ref().map_or(0.0, |(_, c)| *c as f64 / n as f64);
-                iters = needed_iterations(w, 8, p.confidence, p.max_iterations);
-            }
+        if let Some(ep) = eight_point(x0, x1, &eight)
+            && consider(ep.essential(), &mut best, scratch)
+        {
+            let w = best.as_ref().map_or(0.0, |(_, c)| *c as f64 / n as f64);
+            iters = needed_iterations(w, 8, p.confidence, p.max_iterations);
         }
         k += 1;
     }

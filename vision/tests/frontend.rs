@@ -1,6 +1,8 @@
 //! Front-end scenarios on synthetic ground views: accuracy with and without the IMU/terrain
 //! prior, and "no measurement" with a reason for unusable frames.
 
+#![allow(clippy::unwrap_used)]
+
 use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
 use uavnav_core::{CameraModel, Distortion, EgomotionSolver, ImageFormat, MotionPrior};
 use uavnav_vision::synthetic::{Texture, render_ground};

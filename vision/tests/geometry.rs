@@ -1,5 +1,7 @@
 //! Property and Monte Carlo tests of the egomotion maths on synthetic correspondences.
 
+#![allow(clippy::unwrap_used)]
+
 use nalgebra::{Matrix3, Rotation3, Unit, UnitQuaternion, Vector3};
 use proptest::prelude::*;
 use uavnav_core::EgomotionSolver;

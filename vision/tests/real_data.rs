@@ -2,6 +2,8 @@
 //! against the OXTS poses, the static EuRoC frames, and the EuRoC `lcd_pairs` 2→3 with a gyro
 //! prior.
 
+#![allow(clippy::unwrap_used)]
+
 use std::path::PathBuf;
 
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
