@@ -122,10 +122,12 @@ pub struct VisionParams {
     pub klt: KltParams,
     /// Forward–backward consistency threshold, px. Default 0.5.
     pub fb_threshold_px: f32,
-    /// Minimum Shi–Tomasi score for a new corner. Default 20.
+    /// Minimum Shi–Tomasi score for a new corner (on pyramid level 1). Default 20.
     pub min_corner_score: f32,
-    /// Candidate stride when searching a grid cell, px. Default 2.
+    /// Candidate stride when searching a grid cell, level-1 px. Default 2.
     pub corner_step: usize,
+    /// Frames a grid cell without any corner is skipped before it is searched again. Default 4.
+    pub empty_cell_cooldown: u8,
     /// Minimum tracks for solving. Default 20.
     pub min_tracks: usize,
     /// Mean intensity below which a frame is black. Default 12.
@@ -156,6 +158,7 @@ impl Default for VisionParams {
             fb_threshold_px: 0.5,
             min_corner_score: 20.0,
             corner_step: 2,
+            empty_cell_cooldown: 4,
             min_tracks: 20,
             black_mean: 12.0,
             saturated_fraction: 0.8,
@@ -216,6 +219,7 @@ pub struct FrontEnd {
     m_x1: Vec<Vector3<f64>>,
     m_px1: Vec<[f32; 2]>,
     cells: Vec<bool>,
+    cooldown: Vec<u8>,
     klt: KltScratch,
     solve_scratch: SolveScratch,
     rng: Rng,
@@ -253,6 +257,7 @@ impl FrontEnd {
             m_x1: Vec::with_capacity(cap),
             m_px1: Vec::with_capacity(cap),
             cells: Vec::new(),
+            cooldown: Vec::new(),
             klt: KltScratch::default(),
             solve_scratch: SolveScratch::default(),
             rng: Rng::derive(params.seed, "vision-ransac"),
@@ -291,6 +296,7 @@ impl FrontEnd {
         self.prev_t_ns = None;
         self.pts.clear();
         self.rays.clear();
+        self.cooldown.clear();
     }
 
     /// Processes one frame taken at `t_ns`; `prior` describes the motion from
@@ -597,25 +603,42 @@ impl FrontEnd {
         }
         self.pts.truncate(k);
         self.rays.truncate(k);
-        let img = &self.cur.levels[0];
-        for cy in 0..gh {
-            for cx in 0..gw {
-                if self.cells[cy * gw + cx] {
-                    continue;
-                }
-                let rect = (cx * cell, (cx + 1) * cell, cy * cell, (cy + 1) * cell);
-                if let Some((p, _)) = best_corner_in(
-                    img,
-                    rect,
-                    self.params.corner_step,
-                    self.params.min_corner_score,
-                ) {
+        // Search on level 1 (4× fewer candidates; the exact corner peak does not matter to KLT).
+        // A cell that had no corner is left alone for a few frames: re-searching texture-poor
+        // cells every frame would dominate the frame time.
+        self.cooldown.resize(gw * gh, 0);
+        let lvl = usize::from(self.cur.levels.len() > 1);
+        let img = &self.cur.levels[lvl];
+        for c in 0..gw * gh {
+            if self.cells[c] {
+                continue;
+            }
+            if self.cooldown[c] > 0 {
+                self.cooldown[c] -= 1;
+                continue;
+            }
+            let (cx, cy) = (c % gw, c / gw);
+            let rect = (
+                (cx * cell) >> lvl,
+                ((cx + 1) * cell) >> lvl,
+                (cy * cell) >> lvl,
+                ((cy + 1) * cell) >> lvl,
+            );
+            match best_corner_in(
+                img,
+                rect,
+                self.params.corner_step,
+                self.params.min_corner_score,
+            ) {
+                Some((p, _)) => {
+                    let p = [p[0] * (1 << lvl) as f32, p[1] * (1 << lvl) as f32];
                     let n = self
                         .camera
                         .pixel_to_normalized(&Point2::new(f64::from(p[0]), f64::from(p[1])));
                     self.pts.push(p);
                     self.rays.push(Vector3::new(n.x, n.y, 1.0));
                 }
+                None => self.cooldown[c] = self.params.empty_cell_cooldown,
             }
         }
     }

@@ -91,11 +91,46 @@ proptest! {
         // expected here.
         prop_assert!(e_lin < 0.5, "linear rot err {e_lin}°");
         prop_assert!(e_ref < 0.5, "refined rot err {e_ref}°");
-        let cov = propagate_to_motion(&ep.h(), &covariance_h(&ep, &s.x0, &s.x1, &idx, 0.3 / 500.0), &r, &t);
-        let d = rot_diff(&r, &s.r);
-        let m2 = d.dot(&(cov.fixed_view::<3, 3>(0, 0).into_owned().try_inverse().unwrap() * d));
-        prop_assert!(m2 < 22.0, "rotation error {e_lin}° is {m2:.1} σ² away from the covariance");
     }
+}
+
+/// Far points (100–300 baselines, 0.3 px): how often the true rotation lies inside the 95 %
+/// ellipsoid of the first-order covariance. The linearization is least accurate here (small
+/// eigen-gap), so a coverage somewhat below 95 % is expected; it must not be grossly
+/// overconfident.
+#[test]
+fn covariance_coverage_far_points() {
+    let mut inside = 0;
+    let runs = 100;
+    for seed in 0..runs {
+        let mut rng = Rng::new(1000 + seed);
+        let s = scene(&mut rng, 200, (100.0, 300.0), 0.3, 0.3 / 500.0);
+        let idx = all(s.x0.len());
+        let ep = eight_point(&s.x0, &s.x1, &idx).unwrap();
+        let (r, t, _) = best_factorization(&ep.essential(), &s.x0, &s.x1, &idx);
+        let cov = propagate_to_motion(
+            &ep.h(),
+            &covariance_h(&ep, &s.x0, &s.x1, &idx, 0.3 / 500.0),
+            &r,
+            &t,
+        );
+        let d = rot_diff(&r, &s.r);
+        let m2 = d.dot(
+            &(cov
+                .fixed_view::<3, 3>(0, 0)
+                .into_owned()
+                .try_inverse()
+                .unwrap()
+                * d),
+        );
+        inside += usize::from(m2 < 7.81);
+    }
+    let coverage = inside as f64 / runs as f64;
+    eprintln!(
+        "far points: true rotation inside the 95% ellipsoid in {:.0}% of scenes",
+        100.0 * coverage
+    );
+    assert!(coverage >= 0.8, "coverage {coverage}");
 }
 
 /// The first-order covariance (eqs. 22–28) matches Monte Carlo within a factor ~1.5.
