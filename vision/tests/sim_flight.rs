@@ -134,3 +134,31 @@ fn smoke_flight_accuracy() {
         error_stats(&errs)
     );
 }
+
+#[test]
+fn paper_flight_accuracy() {
+    let Some(f) = flight("paper-small-lever") else {
+        eprintln!("skipping: scenarios/paper-small-lever.toml not found or invalid");
+        return;
+    };
+    let mut rng = Rng::new(78);
+    let n = f.camera_times_ns().len();
+    // 200 m above the terrain, one segment of 12 frames a third into the flight
+    let range = (n / 3)..(n / 3 + 12);
+    let frames: Vec<_> = range
+        .clone()
+        .map(|k| f.render_frame(k).expect("render"))
+        .collect();
+    let (errs, missing, solvers) = run(&f, &frames, range.clone(), Method::Auto, true, &mut rng);
+    let st = error_stats(&errs);
+    eprintln!(
+        "paper-small-lever {range:?} auto aided: missing {missing}, solvers {:?}\n{st}",
+        solvers.iter().map(|s| s.as_str()).collect::<Vec<_>>()
+    );
+    assert_eq!(missing, 0);
+    assert_eq!(st.t_over_90, 0);
+    assert!(st.rot_median_deg <= 0.01, "{st}");
+    assert!(st.rot_p95_deg <= 0.05, "{st}");
+    assert!(st.t_median_deg <= 1.0, "{st}");
+    assert!(st.t_p95_deg <= 3.0, "{st}");
+}
