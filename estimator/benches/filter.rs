@@ -3,6 +3,7 @@
 //! + velocity gated updates of the 24-state ESKF).
 //!
 //! `CARGO_TARGET_DIR=/work/target-estimator cargo bench -p uavnav-estimator --bench filter`
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::Vector3;

@@ -3,6 +3,7 @@
 //! rotation, ~1° direction noise, 40 ms latency) until the vision crate is wired in.
 //!
 //! `CARGO_TARGET_DIR=/work/target-estimator cargo run --release -p uavnav-estimator --example paper_report [scenario…]`
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 #[path = "../tests/common/mod.rs"]
 mod common;

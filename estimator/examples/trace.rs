@@ -1,6 +1,7 @@
 //! Prints the error against truth every few seconds for one run (a debugging aid).
 //!
 //! `cargo run --release -p uavnav-estimator --example trace -- SCENARIO eskf|paper [novision] [nognss]`
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 #[path = "../tests/common/mod.rs"]
 mod common;

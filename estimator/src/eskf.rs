@@ -435,15 +435,14 @@ impl Eskf {
                         .fuse_rotation(&x, &c0, &mut self.p, &bfc, m, &use_);
                     self.inject(dx);
                 }
-                if use_.translation {
-                    if let Some(x) = self.x {
-                        if let Some(c0) = x.clone {
-                            let dx =
-                                self.vision
-                                    .fuse_translation(&x, &c0, &mut self.p, &bfc, m, &use_);
-                            self.inject(dx);
-                        }
-                    }
+                if use_.translation
+                    && let Some(x) = self.x
+                    && let Some(c0) = x.clone
+                {
+                    let dx = self
+                        .vision
+                        .fuse_translation(&x, &c0, &mut self.p, &bfc, m, &use_);
+                    self.inject(dx);
                 }
             }
             _ => self.vision.no_clone += 1,

@@ -119,10 +119,10 @@ fn check_order(t_ns: i64, last_t_ns: i64) -> Result<(), InputError> {
 }
 
 fn check_age(t_ns: i64, newest_imu_ns: Option<i64>, p: &EstimatorParams) -> Result<(), InputError> {
-    if let Some(n) = newest_imu_ns {
-        if n - t_ns > p.max_measurement_age_ns {
-            return Err(InputError::TooOld { t_ns, newest_ns: n });
-        }
+    if let Some(n) = newest_imu_ns
+        && n - t_ns > p.max_measurement_age_ns
+    {
+        return Err(InputError::TooOld { t_ns, newest_ns: n });
     }
     Ok(())
 }
@@ -223,10 +223,8 @@ pub fn check_egomotion(
             value: (m.t1_ns - m.t0_ns) as f64 * 1e-9,
         });
     }
-    if let Some(last) = last_t1_ns {
-        if m.t1_ns == last {
-            return Err(InputError::Duplicate { t_ns: m.t1_ns });
-        }
+    if last_t1_ns == Some(m.t1_ns) {
+        return Err(InputError::Duplicate { t_ns: m.t1_ns });
     }
     check_age(m.t1_ns, newest_imu_ns, p)
 }

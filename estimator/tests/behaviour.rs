@@ -1,5 +1,6 @@
 //! Behaviour tests: a static vehicle, bad inputs rejected with the filter unharmed, out-of-order
 //! and late measurements, GNSS glitches, in-flight initialisation, and the motion prior.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod common;
 

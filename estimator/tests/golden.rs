@@ -1,6 +1,7 @@
 //! Golden-output regression on a short flight (the 20 s smoke scenario, fixed seeds, oracle
 //! vision): the final pose and a sum over all outputs must not change unnoticed. If a deliberate
 //! change moves them, re-run with `--nocapture`, check the accuracy is no worse, update the numbers.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod common;
 

@@ -1,6 +1,7 @@
 //! Every Jacobian against finite differences: the error dynamics `A` (F = I + A dt), the noise
 //! mapping (G), and each measurement `H` (GNSS position, GNSS velocity, vision rotation, metric
 //! translation, direction of travel).
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use nalgebra::{Isometry3, SMatrix, Translation3, UnitQuaternion, Vector3};
 use uavnav_estimator::aid_sources::{gnss_pos, gnss_vel, vision};

@@ -1,6 +1,7 @@
 //! Seeded scenario tests on the simulator's paper flights (250 s, 120 s GNSS outage), with the
 //! egomotion ORACLE synthesized from truth (tests only). Targets from issue 3, measured after 30 s.
 //! A full paper flight takes a few seconds in the dev profile, so all run in the normal `cargo test`.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod common;
 
@@ -95,5 +96,37 @@ fn paper_profile_reproduces_the_qualitative_results() {
     assert!(
         v.x < g.x && v.y < g.y,
         "paper attitude with video {v:?} vs GNSS-only {g:?}"
+    );
+}
+
+#[test]
+fn gnss_recovery_after_the_outage_moves_no_more_than_the_stated_uncertainty() {
+    let s = scenario("paper-small-lever", None);
+    let flight = Flight::new(&s).unwrap();
+    let outs = run(&flight, &RunCfg::new(FilterProfile::Eskf, true, None));
+    let (_, end) = outages_ns(&s)[0];
+    let around: Vec<_> = outs
+        .iter()
+        .filter(|o| o.t_ns > end - 2_000_000_000 && o.t_ns < end + 5_000_000_000)
+        .collect();
+    let mut worst = 0.0f64;
+    for w in around.windows(2) {
+        let step = (w[1].pos_ned_m
+            - w[0].pos_ned_m
+            - w[0].vel_ned_mps * ((w[1].t_ns - w[0].t_ns) as f64 * 1e-9))
+            .xy()
+            .norm();
+        let sigma = w[0].sigma_pos_ned_m.xy().norm();
+        worst = worst.max(step / sigma);
+    }
+    assert!(
+        worst <= 3.0,
+        "a correction step of {worst:.2} σ at GNSS recovery"
+    );
+    let after = outs.iter().find(|o| o.t_ns > end + 8_000_000_000).unwrap();
+    let t = uavnav_estimator::accuracy::truth_at(flight.truth(), after.t_ns).unwrap();
+    assert!(
+        (after.pos_ned_m - t.pos_ned_m).xy().norm() < 5.0,
+        "not recovered 8 s after the outage"
     );
 }

@@ -1,4 +1,5 @@
 //! Property and unit tests on the maths and the pure helpers.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use proptest::prelude::*;

@@ -219,8 +219,10 @@ impl PaperFilter {
             self.try_init(&meas, &g, &a_n, &gyro);
             return;
         }
-        if let Some(att) = self.att.as_mut() {
-            if f_mean.norm() > 1.0 {
+        if let Some(att) = self.att.as_mut()
+            && f_mean.norm() > 1.0
+        {
+            {
                 gnss_attitude_aiding(
                     att,
                     &f_mean,

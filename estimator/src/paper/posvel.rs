@@ -56,6 +56,7 @@ impl PosVelEkf {
 
     /// Gated 3-D update of the block at `off` (0 = position, 3 = velocity) with measurement `z`
     /// of that block and noise `r`. Returns whether it was fused.
+    #[allow(clippy::too_many_arguments)]
     fn update_block(
         &mut self,
         off: usize,
