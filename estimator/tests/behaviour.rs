@@ -324,6 +324,16 @@ fn smoke_glitch_rejected_and_outage_bridged() {
         &RunCfg::new(FilterProfile::Eskf, true, Some(Oracle::default())),
     );
     let last = outs.last().unwrap();
+    // Modes: GNSS-denied on vision inside the 12–15 s outage (after the aid timeout), else nominal.
+    let at = |t_s: f64| {
+        outs.iter()
+            .find(|o| o.t_ns >= s.t0_ns + (t_s * 1e9) as i64)
+            .unwrap()
+            .health
+            .mode
+    };
+    assert_eq!(at(10.0), uavnav_estimator::Mode::Nominal);
+    assert_eq!(at(14.8), uavnav_estimator::Mode::GnssDeniedVision);
     // The 8 m glitch at 17–18 s: rejected by the gate, the solution stays within a metre or two.
     assert!(
         last.health.gnss_pos.rejected >= 3,

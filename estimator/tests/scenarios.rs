@@ -130,3 +130,24 @@ fn gnss_recovery_after_the_outage_moves_no_more_than_the_stated_uncertainty() {
         "not recovered 8 s after the outage"
     );
 }
+
+#[test]
+fn eskf_with_metric_translation_from_the_terrain_distance() {
+    // The vision front end may give the metric t (terrain distance known): 2 % relative noise.
+    let oracle = Oracle {
+        metric_rel_sigma: Some(0.02),
+        ..Oracle::default()
+    };
+    let r = report(
+        "paper-small-lever",
+        &RunCfg::new(FilterProfile::Eskf, true, Some(oracle)),
+    );
+    let att = r.att_rmse_deg.unwrap();
+    assert!(att.x <= 0.1 && att.y <= 0.1 && att.z <= 0.3, "{att:?}");
+    assert!(r.outages[0].percent <= 1.0, "{:?}", r.outages);
+    assert!(
+        r.consistency.all_within_3sigma >= 0.95,
+        "{:?}",
+        r.consistency
+    );
+}
