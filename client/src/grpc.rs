@@ -1,0 +1,83 @@
+//! The gRPC backend: a tonic `uavnav.v1.UavNav` client on a channel that reconnects on demand.
+
+use std::time::Duration;
+
+use tonic::transport::{Channel, Endpoint as TonicEndpoint};
+
+use crate::error::ClientError;
+use crate::pb;
+use crate::pb::uav_nav_client::UavNavClient;
+
+/// The generated client on a tonic channel.
+pub type RawClient = UavNavClient<Channel>;
+
+/// Largest message accepted or sent, bytes (1080p JPEG frames fit; matches the service default).
+pub const MAX_MESSAGE_BYTES: usize = 16 << 20;
+
+/// Connects to `uri` (`http://HOST:PORT`), eagerly so that an unreachable service is reported now.
+/// The channel reconnects by itself on later calls after a failure.
+pub async fn connect(uri: &str, connect_timeout: Duration) -> Result<RawClient, ClientError> {
+    let err = |reason: String| ClientError::Connect { endpoint: uri.replacen("http://", "grpc://", 1), reason };
+    let ep = TonicEndpoint::from_shared(uri.to_string())
+        .map_err(|e| err(e.to_string()))?
+        .connect_timeout(connect_timeout)
+        .tcp_nodelay(true)
+        .http2_keep_alive_interval(Duration::from_secs(10))
+        .keep_alive_while_idle(true);
+    let channel = match tokio::time::timeout(connect_timeout, ep.connect()).await {
+        Ok(Ok(c)) => c,
+        Ok(Err(e)) => return Err(err(source_chain(&e))),
+        Err(_) => return Err(err(format!("no connection within {connect_timeout:?}"))),
+    };
+    Ok(UavNavClient::new(channel)
+        .max_decoding_message_size(MAX_MESSAGE_BYTES)
+        .max_encoding_message_size(MAX_MESSAGE_BYTES))
+}
+
+/// `e` and its causes, joined (tonic's top-level message alone is "transport error").
+fn source_chain(e: &dyn std::error::Error) -> String {
+    let mut parts = vec![e.to_string()];
+    let mut cur = e.source();
+    while let Some(s) = cur {
+        parts.push(s.to_string());
+        cur = s.source();
+    }
+    parts.join(": ")
+}
+
+/// Maps a NOT_FOUND status to [`ClientError::NotFound`], others to [`ClientError::Rpc`].
+pub fn map_status(op: &'static str, id: &str, status: tonic::Status) -> ClientError {
+    if status.code() == tonic::Code::NotFound {
+        ClientError::NotFound(id.to_string())
+    } else {
+        ClientError::rpc(op, status)
+    }
+}
+
+/// `ListVehicles`.
+pub async fn list(c: &RawClient, prefix: &str) -> Result<Vec<pb::VehicleSummary>, ClientError> {
+    let req = pb::ListVehiclesRequest { id_prefix: prefix.to_string() };
+    let resp = c.clone().list_vehicles(req).await.map_err(|s| ClientError::rpc("ListVehicles", s))?;
+    Ok(resp.into_inner().vehicles)
+}
+
+/// `GetPose`.
+pub async fn get_pose(c: &RawClient, id: &str) -> Result<pb::PoseEstimate, ClientError> {
+    let req = pb::GetPoseRequest { vehicle_id: id.to_string() };
+    let resp = c.clone().get_pose(req).await.map_err(|s| map_status("GetPose", id, s))?;
+    Ok(resp.into_inner())
+}
+
+/// `ConfigureVehicle`: whether the vehicle was created.
+pub async fn configure(c: &RawClient, id: &str, config: &pb::VehicleConfig) -> Result<bool, ClientError> {
+    let req = pb::ConfigureVehicleRequest { vehicle_id: id.to_string(), config: Some(config.clone()) };
+    let resp = c.clone().configure_vehicle(req).await.map_err(|s| ClientError::rpc("ConfigureVehicle", s))?;
+    Ok(resp.into_inner().created)
+}
+
+/// `ResetVehicle`.
+pub async fn reset(c: &RawClient, id: &str) -> Result<(), ClientError> {
+    let req = pb::ResetVehicleRequest { vehicle_id: id.to_string() };
+    c.clone().reset_vehicle(req).await.map_err(|s| map_status("ResetVehicle", id, s))?;
+    Ok(())
+}

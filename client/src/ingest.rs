@@ -1,0 +1,280 @@
+//! Sensor streams into the service: [`Ingest`] (one logical stream) and its cloneable
+//! [`IngestSender`]s, with counters of what was sent, acknowledged, refused and lost.
+//!
+//! Over gRPC an `Ingest` is one `Ingest` bidirectional stream; a task reads the acks (so flow
+//! control never stalls the sender) and reopens the stream with backoff when it breaks. Envelopes
+//! in flight at a break are lost and counted (`sent - acked`). Over Zenoh each message is a `put`
+//! on the vehicle's key (congestion control `Block`: never dropped locally); there are no acks.
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use prost::Message;
+use tokio::sync::mpsc;
+use tokio::task::JoinHandle;
+
+use crate::error::{ClientError, check_vehicle_id};
+use crate::keys::Leaf;
+use crate::pb;
+use crate::pb::sensor_envelope::Payload;
+
+/// Counters of one ingest stream (shared by its senders).
+#[derive(Debug, Default)]
+pub struct IngestStats {
+    /// Messages handed to the transport.
+    pub sent: AtomicU64,
+    /// Encoded bytes handed to the transport.
+    pub bytes: AtomicU64,
+    /// Acks received (gRPC).
+    pub acked: AtomicU64,
+    /// Acks with status ACCEPTED (gRPC; for Zenoh and discard: every message put).
+    pub accepted: AtomicU64,
+    /// Stream reopenings.
+    pub reconnects: AtomicU64,
+    /// Acks with status OK (kept apart from `statuses`: the hot path takes no lock).
+    ok: AtomicU64,
+    statuses: Mutex<BTreeMap<String, u64>>,
+    errors: Mutex<BTreeMap<String, u64>>,
+}
+
+impl IngestStats {
+    fn status(&self, name: &str) {
+        if let Ok(mut m) = self.statuses.lock() {
+            *m.entry(name.to_string()).or_default() += 1;
+        }
+    }
+
+    fn error(&self, msg: String) {
+        if let Ok(mut m) = self.errors.lock() {
+            *m.entry(msg).or_default() += 1;
+        }
+    }
+
+    /// Counts of acks by status name (`OK` for accepted, else the `IngestStatus` name).
+    pub fn statuses(&self) -> BTreeMap<String, u64> {
+        let mut m = self.statuses.lock().map(|m| m.clone()).unwrap_or_default();
+        let ok = self.ok.load(Ordering::Relaxed);
+        if ok > 0 {
+            m.insert("OK".to_string(), ok);
+        }
+        m
+    }
+
+    /// Transport errors by message.
+    pub fn errors(&self) -> BTreeMap<String, u64> {
+        self.errors.lock().map(|m| m.clone()).unwrap_or_default()
+    }
+
+    fn ack(&self, ack: &pb::IngestAck) {
+        self.acked.fetch_add(1, Ordering::Relaxed);
+        let status = pb::IngestStatus::try_from(ack.status).unwrap_or(pb::IngestStatus::Unspecified);
+        if status == pb::IngestStatus::Accepted {
+            self.accepted.fetch_add(1, Ordering::Relaxed);
+            self.ok.fetch_add(1, Ordering::Relaxed);
+        } else {
+            self.status(status.as_str_name().trim_start_matches("INGEST_STATUS_"));
+        }
+    }
+}
+
+/// Where the messages go.
+#[derive(Debug, Clone)]
+pub(crate) enum Sink {
+    Grpc(mpsc::Sender<pb::SensorEnvelope>),
+    Zenoh(zenoh::Session),
+    Discard,
+}
+
+/// A cloneable handle that sends sensor messages for any vehicle.
+#[derive(Debug, Clone)]
+pub struct IngestSender {
+    sink: Sink,
+    seq: Arc<AtomicU64>,
+    stats: Arc<IngestStats>,
+}
+
+/// The leaf of a payload.
+pub fn leaf_of(p: &Payload) -> Leaf {
+    match p {
+        Payload::Imu(_) => Leaf::Imu,
+        Payload::Gnss(_) => Leaf::Gnss,
+        Payload::Camera(_) => Leaf::Camera,
+        Payload::Config(_) => Leaf::Config,
+    }
+}
+
+/// The protobuf encoding of a payload's message (the Zenoh body / MCAP record).
+pub fn encode_payload(p: &Payload) -> Vec<u8> {
+    match p {
+        Payload::Imu(m) => m.encode_to_vec(),
+        Payload::Gnss(m) => m.encode_to_vec(),
+        Payload::Camera(m) => m.encode_to_vec(),
+        Payload::Config(m) => m.encode_to_vec(),
+    }
+}
+
+impl IngestSender {
+    /// Sends one message for `vehicle_id`. Waits while the transport applies back-pressure.
+    pub async fn send(&self, vehicle_id: &str, payload: Payload) -> Result<(), ClientError> {
+        check_vehicle_id(vehicle_id)?;
+        match &self.sink {
+            Sink::Grpc(tx) => {
+                let sequence = self.seq.fetch_add(1, Ordering::Relaxed);
+                let len = payload_len(&payload);
+                let env = pb::SensorEnvelope { vehicle_id: vehicle_id.to_string(), sequence, payload: Some(payload) };
+                tx.send(env).await.map_err(|_| ClientError::Closed("ingest stream"))?;
+                self.stats.bytes.fetch_add(len as u64, Ordering::Relaxed);
+            }
+            Sink::Zenoh(session) => {
+                let leaf = leaf_of(&payload);
+                let key = crate::keys::vehicle_key(vehicle_id, leaf);
+                let body = encode_payload(&payload);
+                let len = body.len();
+                let put = session
+                    .put(&key, body)
+                    .encoding(crate::zenoh_backend::encoding(leaf.message_name()))
+                    .congestion_control(zenoh::qos::CongestionControl::Block)
+                    .await;
+                if let Err(e) = put {
+                    self.stats.error(format!("zenoh put: {e}"));
+                    return Err(ClientError::Zenoh { op: "put", key, reason: e.to_string() });
+                }
+                self.stats.bytes.fetch_add(len as u64, Ordering::Relaxed);
+                self.stats.accepted.fetch_add(1, Ordering::Relaxed);
+            }
+            Sink::Discard => {
+                // Encode like a transport would, then drop: the cost of producing the load.
+                let env = pb::SensorEnvelope { vehicle_id: vehicle_id.to_string(), sequence: 0, payload: Some(payload) };
+                let body = env.encode_to_vec();
+                self.stats.bytes.fetch_add(body.len() as u64, Ordering::Relaxed);
+                self.stats.accepted.fetch_add(1, Ordering::Relaxed);
+                self.stats.acked.fetch_add(1, Ordering::Relaxed);
+                self.stats.ok.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        self.stats.sent.fetch_add(1, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// The stream's counters.
+    pub fn stats(&self) -> &Arc<IngestStats> {
+        &self.stats
+    }
+}
+
+fn payload_len(p: &Payload) -> usize {
+    match p {
+        Payload::Imu(m) => m.encoded_len(),
+        Payload::Gnss(m) => m.encoded_len(),
+        Payload::Camera(m) => m.encoded_len(),
+        Payload::Config(m) => m.encoded_len(),
+    }
+}
+
+/// One logical ingest stream.
+#[derive(Debug)]
+pub struct Ingest {
+    sender: IngestSender,
+    task: Option<JoinHandle<()>>,
+}
+
+impl Ingest {
+    pub(crate) fn new(sink: Sink, stats: Arc<IngestStats>, task: Option<JoinHandle<()>>) -> Self {
+        Self { sender: IngestSender { sink, seq: Arc::new(AtomicU64::new(0)), stats }, task }
+    }
+
+    /// A sender (cloneable; the stream closes when the `Ingest` and every sender are dropped).
+    pub fn sender(&self) -> IngestSender {
+        self.sender.clone()
+    }
+
+    /// Sends one message (see [`IngestSender::send`]).
+    pub async fn send(&self, vehicle_id: &str, payload: Payload) -> Result<(), ClientError> {
+        self.sender.send(vehicle_id, payload).await
+    }
+
+    /// The counters.
+    pub fn stats(&self) -> &Arc<IngestStats> {
+        &self.sender.stats
+    }
+
+    /// Closes the stream and waits (up to `timeout`) for the outstanding acks; returns the counters.
+    /// Every other [`IngestSender`] must have been dropped for the gRPC stream to close.
+    pub async fn finish(mut self, timeout: Duration) -> Arc<IngestStats> {
+        let stats = Arc::clone(&self.sender.stats);
+        let task = self.task.take();
+        drop(self);
+        if let Some(task) = task {
+            let abort = task.abort_handle();
+            if tokio::time::timeout(timeout, task).await.is_err() {
+                abort.abort();
+            }
+        }
+        stats
+    }
+}
+
+/// The gRPC ingest driver: opens the stream, reads acks, reopens on failure.
+pub(crate) fn spawn_grpc_driver(
+    client: crate::grpc::RawClient,
+    user_rx: mpsc::Receiver<pb::SensorEnvelope>,
+    stats: Arc<IngestStats>,
+    backoff: crate::Backoff,
+) -> JoinHandle<()> {
+    let shared = Arc::new(tokio::sync::Mutex::new(user_rx));
+    tokio::spawn(async move {
+        let mut attempt = 0u32;
+        loop {
+            let closed = Arc::new(std::sync::atomic::AtomicBool::new(false));
+            let requests = request_stream(Arc::clone(&shared), Arc::clone(&closed));
+            let last = match client.clone().ingest(requests).await {
+                Ok(resp) => {
+                    let mut acks = resp.into_inner();
+                    loop {
+                        match acks.message().await {
+                            Ok(Some(ack)) => {
+                                attempt = 0;
+                                stats.ack(&ack);
+                            }
+                            Ok(None) if closed.load(Ordering::Acquire) => return,
+                            Ok(None) => break "the service ended the ingest stream".to_string(),
+                            Err(status) => break format!("{:?}: {}", status.code(), status.message()),
+                        }
+                    }
+                }
+                Err(status) => format!("{:?}: {}", status.code(), status.message()),
+            };
+            stats.error(last.clone());
+            if closed.load(Ordering::Acquire) {
+                return;
+            }
+            attempt += 1;
+            let Some(delay) = backoff.delay(attempt) else {
+                tracing::error!(error = %last, "ingest stream lost; giving up");
+                return;
+            };
+            tracing::warn!(attempt, error = %last, "ingest stream lost; reopening in {delay:?}");
+            stats.reconnects.fetch_add(1, Ordering::Relaxed);
+            tokio::time::sleep(delay).await;
+        }
+    })
+}
+
+/// The request side: pulls from the user's channel; marks `closed` when the user is done.
+fn request_stream(
+    shared: Arc<tokio::sync::Mutex<mpsc::Receiver<pb::SensorEnvelope>>>,
+    closed: Arc<std::sync::atomic::AtomicBool>,
+) -> impl futures::Stream<Item = pb::SensorEnvelope> + Send + 'static {
+    futures::stream::unfold((shared, closed), |(shared, closed)| async move {
+        let next = shared.lock().await.recv().await;
+        match next {
+            Some(env) => Some((env, (shared, closed))),
+            None => {
+                closed.store(true, Ordering::Release);
+                None
+            }
+        }
+    })
+}
