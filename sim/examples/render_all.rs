@@ -28,6 +28,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let sim_s = t.elapsed().as_secs_f64();
     let n = flight.camera_times_ns().len();
     let t = Instant::now();
+    let cpu0 = cpu_time_s();
     let bytes: usize = (0..n)
         .into_par_iter()
         .map(|i| flight.render_frame(i).map(|f| f.data.len()))
@@ -35,12 +36,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .iter()
         .sum();
     let render_s = t.elapsed().as_secs_f64();
+    let cpu_s = cpu_time_s().zip(cpu0).map(|(b, a)| b - a);
     println!(
         "{path}: simulate {sim_s:.2} s; {n} frames rendered + JPEG in {render_s:.2} s on {} threads ({:.1} ms/frame wall, {:.0} KiB/frame)",
         rayon::current_num_threads(),
         1e3 * render_s / n.max(1) as f64,
         bytes as f64 / 1024.0 / n.max(1) as f64
     );
+    if let Some(cpu_s) = cpu_s {
+        println!(
+            "process CPU time while rendering: {cpu_s:.1} s ({:.1} ms/frame)",
+            1e3 * cpu_s / n.max(1) as f64
+        );
+    }
     if let Some((dir, every)) = save {
         std::fs::create_dir_all(&dir)?;
         for i in (0..n).step_by(every.max(1)) {
@@ -54,4 +62,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     Ok(())
+}
+
+/// User + system CPU time of this process, s (Linux `/proc/self/stat`), to measure render cost
+/// independently of other load on the machine.
+fn cpu_time_s() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
 }

@@ -32,6 +32,11 @@
 //!   first-order Gauss–Markov (σ, τ) + glitch steps, per NED axis; reported `sigma_h_m` is the
 //!   per-axis horizontal 1-σ `hypot(white, gm)`, likewise `sigma_v_m`. No fixes inside outages.
 //!   Fix and camera times are snapped to the IMU time grid.
+//! - Camera: centre `p + C_b^n t_bc`, attitude `nav_from_cam = nav_from_body · R_bc` from the mount
+//!   `body_from_cam` (default nadir: camera z = body down, x = body right, y = body backward).
+//!   Each pixel's undistorted ray is intersected with the ellipsoid of semi-axes (a + h, b + h),
+//!   h = terrain elevation — the "Earth surface" the estimator and vision crates model. Rays that
+//!   miss the ground give [`render::SKY_GRAY`]. Frames are 8-bit gray JPEGs at IMU-grid times.
 //! - Random streams: `Rng::derive(seed, "imu")`, `"gnss"`, `"terrain"`, `"image"`: adding or
 //!   changing one sensor never changes another's noise.
 

@@ -89,15 +89,22 @@ fn unit_lo(h: u32) -> f32 {
     (h & 0xFFFF) as f32 * (1.0 / 65_536.0)
 }
 
+/// ⌊x⌋ without a libm call (baseline x86-64 has no rounding instruction); |x| < 2⁶³.
+#[inline]
+fn floor_i64(x: f64) -> i64 {
+    let i = x as i64;
+    if (i as f64) > x { i - 1 } else { i }
+}
+
 /// The four corner hashes and the smoothed fractions of the lattice cell holding (x, y).
 #[inline]
 fn cell(x: f64, y: f64, key: u32) -> ([u32; 4], f32, f32) {
-    let (xf, yf) = (x.floor(), y.floor());
-    let (fx, fy) = ((x - xf) as f32, (y - yf) as f32);
-    let hx0 = (xf as i64 as u32).wrapping_mul(PRIME_X);
+    let (ix, iy) = (floor_i64(x), floor_i64(y));
+    let (fx, fy) = ((x - ix as f64) as f32, (y - iy as f64) as f32);
+    let hx0 = (ix as u32).wrapping_mul(PRIME_X);
     let hx1 = hx0.wrapping_add(PRIME_X);
-    let hy0 = (yf as i64 as u32).wrapping_mul(PRIME_Y) ^ key;
-    let hy1 = (yf as i64 as u32).wrapping_add(1).wrapping_mul(PRIME_Y) ^ key;
+    let hy0 = (iy as u32).wrapping_mul(PRIME_Y) ^ key;
+    let hy1 = (iy as u32).wrapping_add(1).wrapping_mul(PRIME_Y) ^ key;
     let h = [
         fmix(hx0 ^ hy0),
         fmix(hx1 ^ hy0),
@@ -285,6 +292,13 @@ impl Terrain {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn floor_matches_std() {
+        for x in [-2.5, -2.0, -0.1, 0.0, 0.3, 1.0, 7.9, -1e9 - 0.5] {
+            assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
+        }
+    }
 
     #[test]
     fn band_coverage_is_a_box_filter() {
