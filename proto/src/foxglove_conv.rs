@@ -93,6 +93,7 @@ pub fn location_fix_from_wire(f: &v1::GnssFix) -> Result<LocationFix, ConvertErr
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

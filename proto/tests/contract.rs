@@ -1,5 +1,7 @@
 //! The wire contract: descriptor set contents, Foxglove schema drift, and message round trips.
 
+#![allow(clippy::unwrap_used)] // tests may unwrap
+
 use prost::Message;
 use prost_types::FileDescriptorSet;
 use uavnav_proto::{FILE_DESCRIPTOR_SET, names, v1};

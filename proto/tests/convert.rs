@@ -1,5 +1,7 @@
 //! Conversions wire ↔ core: round trips (proptest) and one test per kind of bad input.
 
+#![allow(clippy::unwrap_used)] // tests may unwrap
+
 use std::sync::Arc;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
