@@ -510,6 +510,13 @@ impl FrontEnd {
         } else {
             self.params.pyramid_levels
         };
+        // With the full prediction the backward search starts next to its answer: the finest
+        // level suffices for the consistency check.
+        let back_top = if aid && full_prediction {
+            0
+        } else {
+            levels.max(1) - 1
+        };
         let top = levels.max(1) - 1;
         let fb2 = self.params.fb_threshold_px * self.params.fb_threshold_px;
         for i in 0..self.pts.len() {
@@ -540,7 +547,7 @@ impl FrontEnd {
                 p1,
                 bg,
                 back_affine,
-                top,
+                back_top,
                 &self.params.klt,
                 &mut self.klt,
             ) else {

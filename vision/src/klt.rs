@@ -164,10 +164,15 @@ fn track_level(
         }
         let jmean = s.patch[..n].iter().sum::<f32>() / nf;
         let (mut bx, mut by) = (0.0f32, 0.0f32);
-        for i in 0..n {
-            let e = s.template[i] - (s.patch[i] - jmean);
-            bx += e * s.gx[i];
-            by += e * s.gy[i];
+        for (((t, j), gx), gy) in s.template[..n]
+            .iter()
+            .zip(&s.patch[..n])
+            .zip(&s.gx[..n])
+            .zip(&s.gy[..n])
+        {
+            let e = t - (j - jmean);
+            bx += e * gx;
+            by += e * gy;
         }
         // the update is in template coordinates; in `next` it is A·δ
         let (ux, uy) = (inv * (gyy * bx - gxy * by), inv * (gxx * by - gxy * bx));
