@@ -168,7 +168,7 @@ impl Dataset {
                 }
             }
             Inner::Mcap(d) => EventStream {
-                inner: Events::Mcap(d.events()?),
+                inner: Events::Mcap(Box::new(d.events()?)),
                 skipped: Arc::default(),
             },
         })
@@ -178,7 +178,7 @@ impl Dataset {
 #[derive(Debug)]
 enum Events {
     Asl(merge::Merge),
-    Mcap(mcap_io::reader::McapEvents),
+    Mcap(Box<mcap_io::reader::McapEvents>),
 }
 
 /// Time-ordered sensor events of one vehicle. The first error ends the stream.

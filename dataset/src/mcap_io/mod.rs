@@ -138,10 +138,11 @@ pub fn schema_data(message: &str) -> Option<Vec<u8>> {
     let mut wanted = BTreeSet::new();
     let mut stack = vec![root.name().to_owned()];
     while let Some(file) = stack.pop() {
-        if wanted.insert(file.clone()) {
-            if let Some(f) = all.file.iter().find(|f| f.name() == file) {
-                stack.extend(f.dependency.iter().cloned());
-            }
+        if !wanted.insert(file.clone()) {
+            continue;
+        }
+        if let Some(f) = all.file.iter().find(|f| f.name() == file) {
+            stack.extend(f.dependency.iter().cloned());
         }
     }
     // Dependencies first, as protoc orders them.
