@@ -137,8 +137,8 @@ impl Ingestor {
         let (n, mut batch, mut late, mut future) = (samples.len(), Vec::with_capacity(samples.len()), 0, 0);
         let mut first_refusal = None;
         for (i, s) in samples.into_iter().enumerate() {
-            let field = format!("imu.samples[{i}]");
-            match h.shared.admit(InputKind::Imu, s.t_ns, ctx.window_ns(), ctx.max_future_ns(), &field) {
+            let field = || format!("imu.samples[{i}]");
+            match h.shared.admit(InputKind::Imu, s.t_ns, ctx.window_ns(), ctx.max_future_ns(), field) {
                 Ok(()) => batch.push(Stamped { input: Input::Imu(s), wall_ns: wall, at }),
                 Err(r) => {
                     match &r {
@@ -173,7 +173,7 @@ impl Ingestor {
         let h = self.vehicle(id)?;
         let ctx = self.registry.ctx();
         h.shared
-            .admit(InputKind::Gnss, fix.t_ns, ctx.window_ns(), ctx.max_future_ns(), "gnss")
+            .admit(InputKind::Gnss, fix.t_ns, ctx.window_ns(), ctx.max_future_ns(), || "gnss".into())
             .map_err(|r| gate_rejection(Some(r)))?;
         let wall = wall_ns();
         self.send(&h, id, Msg::Data(vec![Stamped { input: Input::Gnss(fix), wall_ns: wall, at: Instant::now() }]))
@@ -194,7 +194,7 @@ impl Ingestor {
         let frame = validate::camera_frame(c, h.shared.camera(), self.limits)?;
         let ctx = self.registry.ctx();
         h.shared
-            .admit(InputKind::Camera, frame.t_ns, ctx.window_ns(), ctx.max_future_ns(), "camera")
+            .admit(InputKind::Camera, frame.t_ns, ctx.window_ns(), ctx.max_future_ns(), || "camera".into())
             .map_err(|r| gate_rejection(Some(r)))?;
         let wall = wall_ns();
         let stamped = Stamped { input: Input::Camera(frame), wall_ns: wall, at: Instant::now() };

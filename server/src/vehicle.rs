@@ -92,26 +92,28 @@ impl TimeGate {
         t_ns: i64,
         window_ns: i64,
         max_future_ns: i64,
-        field: &str,
+        field: impl Fn() -> String,
     ) -> Result<(), GateRefusal> {
         if let Some(newest) = self.newest_ns {
             if t_ns > newest.saturating_add(max_future_ns) {
                 return Err(GateRefusal::Future(format!(
-                    "{field}: t_ns {t_ns} is {:.3} s ahead of the vehicle's newest sample (limit {:.3} s)",
+                    "{}: t_ns {t_ns} is {:.3} s ahead of the vehicle's newest sample (limit {:.3} s)",
+                    field(),
                     (t_ns - newest) as f64 * 1e-9,
                     max_future_ns as f64 * 1e-9
                 )));
             }
             if t_ns < newest.saturating_sub(window_ns) {
                 return Err(GateRefusal::Late(format!(
-                    "{field}: t_ns {t_ns} is {:.3} s older than the vehicle's newest sample (reorder window {:.3} s)",
+                    "{}: t_ns {t_ns} is {:.3} s older than the vehicle's newest sample (reorder window {:.3} s)",
+                    field(),
                     (newest - t_ns) as f64 * 1e-9,
                     window_ns as f64 * 1e-9
                 )));
             }
         }
         if self.last_ns[kind as usize] == Some(t_ns) {
-            return Err(GateRefusal::Late(format!("{field}: duplicate t_ns {t_ns}")));
+            return Err(GateRefusal::Late(format!("{}: duplicate t_ns {t_ns}", field())));
         }
         self.last_ns[kind as usize] = Some(t_ns);
         self.newest_ns = Some(self.newest_ns.map_or(t_ns, |n| n.max(t_ns)));
@@ -171,7 +173,7 @@ impl VehicleShared {
         t_ns: i64,
         window_ns: i64,
         max_future_ns: i64,
-        field: &str,
+        field: impl Fn() -> String,
     ) -> Result<(), GateRefusal> {
         let mut gate = self.gate.lock().unwrap_or_else(|p| p.into_inner());
         gate.admit(kind, t_ns, window_ns, max_future_ns, field)
@@ -214,11 +216,11 @@ mod tests {
     fn gate_refuses_late_duplicate_and_future() {
         let mut g = TimeGate::default();
         let (w, f) = (100, 1_000);
-        assert!(g.admit(InputKind::Imu, 1_000, w, f, "imu").is_ok());
-        assert!(matches!(g.admit(InputKind::Imu, 1_000, w, f, "imu"), Err(GateRefusal::Late(_))));
-        assert!(g.admit(InputKind::Gnss, 950, w, f, "gnss").is_ok(), "within the window");
-        assert!(matches!(g.admit(InputKind::Gnss, 800, w, f, "gnss"), Err(GateRefusal::Late(_))));
-        assert!(matches!(g.admit(InputKind::Imu, 3_000, w, f, "imu"), Err(GateRefusal::Future(_))));
-        assert!(g.admit(InputKind::Imu, 1_900, w, f, "imu").is_ok());
+        assert!(g.admit(InputKind::Imu, 1_000, w, f, || "imu".into()).is_ok());
+        assert!(matches!(g.admit(InputKind::Imu, 1_000, w, f, || "imu".into()), Err(GateRefusal::Late(_))));
+        assert!(g.admit(InputKind::Gnss, 950, w, f, || "gnss".into()).is_ok(), "within the window");
+        assert!(matches!(g.admit(InputKind::Gnss, 800, w, f, || "gnss".into()), Err(GateRefusal::Late(_))));
+        assert!(matches!(g.admit(InputKind::Imu, 3_000, w, f, || "imu".into()), Err(GateRefusal::Future(_))));
+        assert!(g.admit(InputKind::Imu, 1_900, w, f, || "imu".into()).is_ok());
     }
 }
