@@ -3,7 +3,9 @@
 
 use std::collections::VecDeque;
 
-use uavnav_core::{CameraFrame, Egomotion, EgomotionSolver, GnssFix, ImuSample, SensorEvent, VehicleConfig};
+use uavnav_core::{
+    CameraFrame, Egomotion, EgomotionSolver, GnssFix, ImuSample, SensorEvent, VehicleConfig,
+};
 use uavnav_estimator::{Estimator, EstimatorParams, Health, InputError, PoseOutput};
 use uavnav_vision::{FrameResult, FrontEnd, NoMeasurement, VisionParams};
 
@@ -107,8 +109,14 @@ impl VisionJob {
     /// Runs the front end on the frame (CPU work: decode, track, solve).
     pub fn run(mut self) -> VisionDone {
         let f = &self.frame;
-        let result = self.frontend.process(f.t_ns, f.format, &f.data, &self.prior);
-        VisionDone { frontend: self.frontend, result, generation: self.generation }
+        let result = self
+            .frontend
+            .process(f.t_ns, f.format, &f.data, &self.prior);
+        VisionDone {
+            frontend: self.frontend,
+            result,
+            generation: self.generation,
+        }
     }
 }
 
@@ -148,16 +156,25 @@ pub struct VehicleRunner {
     /// Events held behind the job that is out.
     held: VecDeque<SensorEvent>,
     stats: VisionStats,
+    /// The front end's last result (read-only, for evaluation against truth).
+    last_result: Option<FrameResult>,
 }
 
 impl VehicleRunner {
     /// A runner for one vehicle; `origin` fixes the local NED frame (else the first GNSS fix).
-    pub fn new(config: VehicleConfig, params: RunnerParams, origin: Option<uavnav_core::Lla>) -> Self {
+    pub fn new(
+        config: VehicleConfig,
+        params: RunnerParams,
+        origin: Option<uavnav_core::Lla>,
+    ) -> Self {
         let estimator = Estimator::new(&config, params.estimator.clone(), origin);
-        let frontend = config
-            .camera
-            .as_ref()
-            .map(|c| Box::new(FrontEnd::new(&c.model, c.body_from_cam, params.vision.clone())));
+        let frontend = config.camera.as_ref().map(|c| {
+            Box::new(FrontEnd::new(
+                &c.model,
+                c.body_from_cam,
+                params.vision.clone(),
+            ))
+        });
         Self {
             config,
             params,
@@ -168,6 +185,7 @@ impl VehicleRunner {
             pending: VecDeque::new(),
             held: VecDeque::new(),
             stats: VisionStats::default(),
+            last_result: None,
         }
     }
 
@@ -186,6 +204,11 @@ impl VehicleRunner {
         &self.stats
     }
 
+    /// The front end's last frame result (measurement or reason), for evaluation against truth.
+    pub fn last_frame_result(&self) -> Option<&FrameResult> {
+        self.last_result.as_ref()
+    }
+
     /// Events currently held behind a vision job.
     pub fn held_events(&self) -> usize {
         self.held.len()
@@ -199,7 +222,11 @@ impl VehicleRunner {
         self.pending.clear();
         self.held.clear();
         self.frontend = self.config.camera.as_ref().map(|c| {
-            Box::new(FrontEnd::new(&c.model, c.body_from_cam, self.params.vision.clone()))
+            Box::new(FrontEnd::new(
+                &c.model,
+                c.body_from_cam,
+                self.params.vision.clone(),
+            ))
         });
     }
 
@@ -228,9 +255,10 @@ impl VehicleRunner {
         self.frontend = Some(done.frontend);
         let deadline = self.job_deadline_ns.take().unwrap_or(done.result.t1_ns);
         self.record(&done.result);
-        if let Ok(ego) = done.result.outcome {
-            self.pending.push_back((deadline, ego));
+        if let Ok(ego) = &done.result.outcome {
+            self.pending.push_back((deadline, ego.clone()));
         }
+        self.last_result = Some(done.result);
         self.replay(&mut step);
         step
     }
@@ -258,7 +286,10 @@ impl VehicleRunner {
         }
         match self.job_deadline_ns {
             None => false,
-            Some(deadline) => event.t_ns() >= deadline || matches!(event, SensorEvent::Camera(_)) && self.params.use_vision,
+            Some(deadline) => {
+                event.t_ns() >= deadline
+                    || matches!(event, SensorEvent::Camera(_)) && self.params.use_vision
+            }
         }
     }
 
@@ -270,14 +301,20 @@ impl VehicleRunner {
             self.generation += 1;
             self.job_deadline_ns = None;
             self.frontend = self.config.camera.as_ref().map(|c| {
-                Box::new(FrontEnd::new(&c.model, c.body_from_cam, self.params.vision.clone()))
+                Box::new(FrontEnd::new(
+                    &c.model,
+                    c.body_from_cam,
+                    self.params.vision.clone(),
+                ))
             });
         }
     }
 
     fn replay(&mut self, step: &mut Step) {
         while step.job.is_none() && self.job_deadline_ns.is_none() {
-            let Some(event) = self.held.pop_front() else { break };
+            let Some(event) = self.held.pop_front() else {
+                break;
+            };
             if self.process(event, step).is_err() {
                 self.stats.replay_rejected += 1;
             }
@@ -337,7 +374,12 @@ impl VehicleRunner {
         let prior = self.estimator.motion_prior(t0, frame.t_ns);
         self.job_deadline_ns = Some(frame.t_ns.saturating_add(self.params.vision_delay_ns));
         self.stats.frames += 1;
-        step.job = Some(VisionJob { frontend, frame, prior, generation: self.generation });
+        step.job = Some(VisionJob {
+            frontend,
+            frame,
+            prior,
+            generation: self.generation,
+        });
     }
 
     fn record(&mut self, r: &FrameResult) {
