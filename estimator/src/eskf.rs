@@ -548,13 +548,36 @@ impl Eskf {
         })
     }
 
+    /// Before alignment there is no attitude (no ground plane, no velocity) but the relative
+    /// rotation still follows from the raw gyros with the bias taken as zero at its initial σ.
+    /// Without it the front end falls back to an unaided essential matrix, which over flat ground
+    /// (a planar scene) can return a confident wrong rotation.
+    fn uninitialised_prior(&self, t0_ns: i64, t1_ns: i64) -> MotionPrior {
+        let Some(bfc) = self.body_from_cam else {
+            return MotionPrior::default();
+        };
+        let Some(b0_from_b1) =
+            crate::motion_prior::gyro_rotation(&self.imu, t0_ns, t1_ns, &Vector3::zeros())
+        else {
+            return MotionPrior::default();
+        };
+        let dt_s = (t1_ns - t0_ns) as f64 * 1e-9;
+        let r_bc = bfc.rotation;
+        MotionPrior {
+            cam1_from_cam0: Some(r_bc.inverse() * b0_from_b1.inverse() * r_bc),
+            rot_sigma_rad: self.gyro_psd.sqrt() * dt_s.sqrt()
+                + self.params.init_gyro_bias_sigma_radps * dt_s,
+            ..MotionPrior::default()
+        }
+    }
+
     /// The prior for the vision front end between frame times `t0_ns < t1_ns` (see
     /// [`MotionPrior`]); fields are `None` where the filter cannot tell.
     pub fn motion_prior(&self, t0_ns: i64, t1_ns: i64, terrain_elevation_m: f64) -> MotionPrior {
         let (Some(bfc), Some(o), Some(frame)) =
             (self.body_from_cam, self.out.x.as_ref(), self.frame.as_ref())
         else {
-            return MotionPrior::default();
+            return self.uninitialised_prior(t0_ns, t1_ns);
         };
         let bias_sigma = self.p[(crate::state::IBG, crate::state::IBG)]
             .max(0.0)
