@@ -4,7 +4,6 @@
 //! health stream, not in metric labels.
 
 use std::sync::Arc;
-use std::sync::atomic::AtomicU64;
 
 use prometheus_client::encoding::{EncodeLabelSet, EncodeLabelValue, LabelValueEncoder};
 use prometheus_client::metrics::counter::Counter;
@@ -115,7 +114,7 @@ pub struct Metrics {
     /// Camera frames shed because the vision pool or a vehicle's camera queue was full.
     pub vision_shed: Counter,
     /// Vision jobs queued or running.
-    pub vision_in_flight: Gauge<i64, AtomicU64>,
+    pub vision_in_flight: Gauge,
     /// Late / duplicate inputs dropped inside the actors' reorder windows.
     pub reorder_dropped: Counter,
     /// Engine errors on inputs that passed validation.
@@ -137,7 +136,7 @@ impl Metrics {
         let vision_done = Counter::default();
         let vision_failed = Counter::default();
         let vision_shed = Counter::default();
-        let vision_in_flight = Gauge::<i64, AtomicU64>::default();
+        let vision_in_flight = Gauge::default();
         let reorder_dropped = Counter::default();
         let engine_errors = Counter::default();
         let zenoh_output_lagged = Counter::default();

@@ -93,7 +93,8 @@ impl ZenohIo {
     /// Opens the session and starts the input, output and query tasks.
     pub async fn start(cfg: &ZenohConfig, ingestor: Ingestor, hub: Hub) -> anyhow::Result<Self> {
         let session = zenoh::open(session_config(cfg)?).await.map_err(|e| anyhow!("opening the zenoh session: {e}"))?;
-        let locators = session.info().locators().await.iter().map(|l| l.to_string()).collect();
+        // Zenoh 1.x does not expose the bound locators on the session: report the configured ones.
+        let locators = cfg.listen.clone();
         let instance = if cfg.instance.is_empty() { default_instance() } else { cfg.instance.clone() };
         let service_token = session
             .liveliness()
@@ -324,12 +325,16 @@ async fn publish_outputs(
             biased;
             r = health.recv() => match r {
                 Ok(h) => out.health(&h).await,
-                Err(broadcast::error::RecvError::Lagged(n)) => metrics.zenoh_output_lagged.inc_by(n),
+                Err(broadcast::error::RecvError::Lagged(n)) => {
+                    metrics.zenoh_output_lagged.inc_by(n);
+                }
                 Err(broadcast::error::RecvError::Closed) => break,
             },
             r = poses.recv() => match r {
                 Ok(p) => out.pose(&p).await,
-                Err(broadcast::error::RecvError::Lagged(n)) => metrics.zenoh_output_lagged.inc_by(n),
+                Err(broadcast::error::RecvError::Lagged(n)) => {
+                    metrics.zenoh_output_lagged.inc_by(n);
+                }
                 Err(broadcast::error::RecvError::Closed) => break,
             },
             _ = &mut done => break,
