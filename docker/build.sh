@@ -79,6 +79,8 @@ trap 'rm -rf "$stage"' EXIT
 rootfs=$stage/rootfs
 mkdir -p "$rootfs"/{usr/local/bin,etc/uavnav,usr/share/uavnav/scenarios,tmp} "$stage"/owned/{data,recordings}
 install -m 0755 "$bin_dir/uavnavd" "$bin_dir/uavnav" "$rootfs/usr/local/bin/"
+# Debug info is most of a dev binary's size (hundreds of MB); the image needs none of it.
+if command -v strip >/dev/null; then strip --strip-debug "$rootfs"/usr/local/bin/*; fi
 
 # Shared libraries, at the paths the binaries look them up, plus the dynamic loader. `ldd` prints
 # "name => /path (addr)" for libraries and "/path (addr)" for the loader; vdso has no file.

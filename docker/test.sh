@@ -44,7 +44,7 @@ readonly MAX_RMS_H_M=3.0             # horizontal RMS error bound per drone
 readonly MAX_H_M=8.0                 # horizontal max error bound per drone
 readonly STALE_AGE_S=2.5             # `uavnav health --max-age`: input older than this = stale
 readonly STALE_TIMEOUT=20            # disconnect -> every vehicle of the container stale
-readonly HOLD_DISCONNECTED=4         # extra time disconnected once stale
+readonly HOLD_DISCONNECTED=2         # extra time disconnected once stale
 readonly RECOVER_TIMEOUT=60          # connect -> every vehicle fresh again
 
 project="uavnavtest$$"
