@@ -238,8 +238,12 @@ impl VehicleRunner {
             }
         }
         if self.must_hold(&event) {
-            self.hold(event);
-            return Ok(Step::default());
+            let mut step = Step::default();
+            if self.hold(event) {
+                // The job was abandoned: what it held back flows again (never lose IMU).
+                self.replay(&mut step);
+            }
+            return Ok(step);
         }
         let mut step = Step::default();
         self.process(event, &mut step)?;
@@ -293,9 +297,11 @@ impl VehicleRunner {
         }
     }
 
-    fn hold(&mut self, event: SensorEvent) {
+    /// Holds `event`; returns whether the outstanding job was abandoned for holding too much.
+    fn hold(&mut self, event: SensorEvent) -> bool {
         self.held.push_back(event);
-        if self.held.len() > self.params.max_held_events {
+        let abandon = self.held.len() > self.params.max_held_events;
+        if abandon {
             // The job is too slow: give up on it rather than ever lose IMU.
             self.stats.abandoned += 1;
             self.generation += 1;
@@ -308,6 +314,7 @@ impl VehicleRunner {
                 ))
             });
         }
+        abandon
     }
 
     fn replay(&mut self, step: &mut Step) {

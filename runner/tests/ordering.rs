@@ -94,3 +94,21 @@ fn frame_without_camera_config_is_refused_and_harmless() {
     }
     assert!(refused > 5);
 }
+
+#[test]
+fn a_job_that_never_returns_is_abandoned_and_the_stream_flows_again() {
+    let (flight, events) = smoke_events(6.0);
+    let params = RunnerParams { max_held_events: 100, ..RunnerParams::default() };
+    let mut r = VehicleRunner::new(flight.vehicle_config(), params, Some(flight.origin()));
+    let mut poses = 0usize;
+    let mut lost_jobs = Vec::new();
+    for e in &events {
+        let step = r.push(e.clone()).expect("accepted");
+        poses += step.poses.len();
+        // The worker never hands the job back (e.g. a pool that refused it).
+        lost_jobs.extend(step.job);
+    }
+    assert!(r.vision_stats().abandoned > 0);
+    assert!(r.held_events() <= 100, "held {}", r.held_events());
+    assert!(poses > 500, "poses {poses}: IMU must keep flowing without vision results");
+}
