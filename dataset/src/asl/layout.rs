@@ -86,7 +86,10 @@ pub const TRUTH_COLUMNS: &[&str] = &[
 ];
 
 /// Formats a float for CSV/YAML: shortest text that parses back to the same `f64` (exponent form
-/// for very small or large magnitudes), so files round-trip bit-exactly.
+/// for very small or large magnitudes), so files round-trip bit-exactly. Negative zero is written
+/// as `0.0`: protobuf and MCAP do not keep the sign of zero, and the files must not depend on the
+/// path the data took.
 pub fn fmt_f64(v: f64) -> String {
+    let v = if v == 0.0 { 0.0 } else { v };
     format!("{v:?}")
 }
