@@ -11,22 +11,31 @@ use uavnav_client::{Client, Selector, pb};
 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
-    let url = std::env::args().nth(1).unwrap_or_else(|| "grpc://127.0.0.1:50051".into());
+    let url = std::env::args()
+        .nth(1)
+        .unwrap_or_else(|| "grpc://127.0.0.1:50051".into());
     let client = Client::connect_url(&url).await?;
     // Ten poses per second per vehicle are plenty for a fleet overview.
-    let mut poses = client.watch_poses(Selector::all().with_decimation(20)).await?;
+    let mut poses = client
+        .watch_poses(Selector::all().with_decimation(20))
+        .await?;
     let mut health = client.watch_health(Selector::all()).await?;
-    let mut latest: BTreeMap<String, (Option<pb::PoseEstimate>, Option<pb::VehicleHealth>)> = BTreeMap::new();
+    let mut latest: BTreeMap<String, (Option<pb::PoseEstimate>, Option<pb::VehicleHealth>)> =
+        BTreeMap::new();
     let mut tick = tokio::time::interval(Duration::from_secs(1));
     loop {
         tokio::select! {
             p = poses.next() => match p {
-                Some(Ok(p)) => latest.entry(p.vehicle_id.clone()).or_default().0 = Some(p),
+                Some(Ok(p)) => {
+                    let id = p.vehicle_id.clone();
+                    latest.entry(id).or_default().0 = Some(p);
+                }
                 Some(Err(e)) => return Err(e.into()),
                 None => return Ok(()),
             },
             h = health.next() => if let Some(Ok(h)) = h {
-                latest.entry(h.vehicle_id.clone()).or_default().1 = Some(h);
+                let id = h.vehicle_id.clone();
+                latest.entry(id).or_default().1 = Some(h);
             },
             _ = tick.tick() => {
                 for (id, (p, h)) in &latest {

@@ -74,13 +74,22 @@ impl Client {
     /// Connects to `endpoint`; fails if the service is unreachable within the connect timeout.
     pub async fn connect(endpoint: &Endpoint, opts: ConnectOptions) -> Result<Client, ClientError> {
         let backend = match endpoint {
-            Endpoint::Grpc { uri } => Backend::Grpc(grpc::connect(uri, opts.connect_timeout).await?),
-            Endpoint::Zenoh { connect, client_mode } => {
-                Backend::Zenoh(zenoh_backend::open(connect, *client_mode, opts.connect_timeout).await?)
+            Endpoint::Grpc { uri } => {
+                Backend::Grpc(grpc::connect(uri, opts.connect_timeout).await?)
             }
+            Endpoint::Zenoh {
+                connect,
+                client_mode,
+            } => Backend::Zenoh(
+                zenoh_backend::open(connect, *client_mode, opts.connect_timeout).await?,
+            ),
             Endpoint::Discard => Backend::Discard,
         };
-        Ok(Client { endpoint: endpoint.clone(), backend, opts })
+        Ok(Client {
+            endpoint: endpoint.clone(),
+            backend,
+            opts,
+        })
     }
 
     /// Parses `url` and connects with default options.
@@ -112,13 +121,20 @@ impl Client {
             let timeout = self.opts.request_timeout;
             let r = match tokio::time::timeout(timeout, f()).await {
                 Ok(r) => r,
-                Err(_) => Err(ClientError::Timeout { op, timeout_ms: timeout.as_millis() as u64 }),
+                Err(_) => Err(ClientError::Timeout {
+                    op,
+                    timeout_ms: timeout.as_millis() as u64,
+                }),
             };
             match r {
                 Err(e) if e.is_transient() => {
                     attempt += 1;
                     let Some(delay) = self.opts.backoff.delay(attempt) else {
-                        return Err(ClientError::GaveUp { op, attempts: attempt - 1, last: e.to_string() });
+                        return Err(ClientError::GaveUp {
+                            op,
+                            attempts: attempt - 1,
+                            last: e.to_string(),
+                        });
                     };
                     tracing::debug!(op, attempt, error = %e, "retrying in {delay:?}");
                     tokio::time::sleep(delay).await;
@@ -129,7 +145,10 @@ impl Client {
     }
 
     /// The vehicles the service knows whose id starts with `prefix` (empty = all), sorted by id.
-    pub async fn list_vehicles(&self, prefix: &str) -> Result<Vec<pb::VehicleSummary>, ClientError> {
+    pub async fn list_vehicles(
+        &self,
+        prefix: &str,
+    ) -> Result<Vec<pb::VehicleSummary>, ClientError> {
         let t = self.opts.request_timeout;
         match &self.backend {
             Backend::Grpc(c) => self.retry("ListVehicles", || grpc::list(c, prefix)).await,
@@ -151,10 +170,17 @@ impl Client {
 
     /// Creates or reconfigures a vehicle. `Some(created)` over gRPC; `None` over Zenoh (a put has
     /// no reply).
-    pub async fn configure(&self, id: &str, config: &pb::VehicleConfig) -> Result<Option<bool>, ClientError> {
+    pub async fn configure(
+        &self,
+        id: &str,
+        config: &pb::VehicleConfig,
+    ) -> Result<Option<bool>, ClientError> {
         check_vehicle_id(id)?;
         match &self.backend {
-            Backend::Grpc(c) => self.retry("ConfigureVehicle", || grpc::configure(c, id, config)).await.map(Some),
+            Backend::Grpc(c) => self
+                .retry("ConfigureVehicle", || grpc::configure(c, id, config))
+                .await
+                .map(Some),
             Backend::Zenoh(s) => zenoh_backend::configure(s, id, config).await.map(|()| None),
             Backend::Discard => Ok(None),
         }
@@ -165,7 +191,10 @@ impl Client {
         check_vehicle_id(id)?;
         match &self.backend {
             Backend::Grpc(c) => self.retry("ResetVehicle", || grpc::reset(c, id)).await,
-            Backend::Zenoh(_) => Err(ClientError::Unsupported { op: "reset", transport: "Zenoh" }),
+            Backend::Zenoh(_) => Err(ClientError::Unsupported {
+                op: "reset",
+                transport: "Zenoh",
+            }),
             Backend::Discard => Ok(()),
         }
     }
@@ -179,21 +208,34 @@ impl Client {
     }
 
     /// Health reports of the selected vehicles (resumes after failures).
-    pub async fn watch_health(&self, sel: Selector) -> Result<Watch<pb::VehicleHealth>, ClientError> {
+    pub async fn watch_health(
+        &self,
+        sel: Selector,
+    ) -> Result<Watch<pb::VehicleHealth>, ClientError> {
         self.watch(sel, Leaf::Health, "WatchHealth", |mut c, req| async move {
             c.watch_health(req).await.map(|r| r.into_inner())
         })
         .await
     }
 
-    async fn watch<M, F, Fut>(&self, sel: Selector, leaf: Leaf, op: &'static str, call: F) -> Result<Watch<M>, ClientError>
+    async fn watch<M, F, Fut>(
+        &self,
+        sel: Selector,
+        leaf: Leaf,
+        op: &'static str,
+        call: F,
+    ) -> Result<Watch<M>, ClientError>
     where
         M: prost::Message + Default + Send + 'static,
         F: Fn(RawClient, pb::WatchRequest) -> Fut + Send + Sync + Clone + 'static,
         Fut: Future<Output = Result<tonic::Streaming<M>, tonic::Status>> + Send,
     {
         if sel.is_empty() {
-            return Err(ClientError::Rpc { op, code: tonic::Code::InvalidArgument, message: "the selector selects no vehicle".into() });
+            return Err(ClientError::Rpc {
+                op,
+                code: tonic::Code::InvalidArgument,
+                message: "the selector selects no vehicle".into(),
+            });
         }
         for id in &sel.ids {
             check_vehicle_id(id)?;
@@ -203,17 +245,22 @@ impl Client {
             Backend::Grpc(c) => {
                 let (c, req) = (c.clone(), sel.to_request());
                 // Fail now on a refusal (bad selector, service down) rather than inside the task.
-                let first = call(c.clone(), req.clone()).await.map_err(|s| ClientError::rpc(op, s))?;
+                let first = call(c.clone(), req.clone())
+                    .await
+                    .map_err(|s| ClientError::rpc(op, s))?;
                 let first = Arc::new(std::sync::Mutex::new(Some(first)));
                 Ok(Watch::spawn(op, backoff, move || {
-                    let (c, req, call, first) = (c.clone(), req.clone(), call.clone(), Arc::clone(&first));
+                    let (c, req, call, first) =
+                        (c.clone(), req.clone(), call.clone(), Arc::clone(&first));
                     async move {
                         let taken = first.lock().ok().and_then(|mut f| f.take());
                         let stream = match taken {
                             Some(s) => s,
                             None => call(c, req).await.map_err(|s| ClientError::rpc(op, s))?,
                         };
-                        Ok(Box::pin(futures::StreamExt::map(stream, move |r| r.map_err(|s| ClientError::rpc(op, s)))))
+                        Ok(Box::pin(futures::StreamExt::map(stream, move |r| {
+                            r.map_err(|s| ClientError::rpc(op, s))
+                        })))
                     }
                 }))
             }
@@ -244,7 +291,8 @@ impl Client {
         Ok(match &self.backend {
             Backend::Grpc(c) => {
                 let (tx, rx) = mpsc::channel(self.opts.ingest_buffer.max(1));
-                let task = spawn_grpc_driver(c.clone(), rx, Arc::clone(&stats), self.opts.backoff.clone());
+                let task =
+                    spawn_grpc_driver(c.clone(), rx, Arc::clone(&stats), self.opts.backoff.clone());
                 Ingest::new(Sink::Grpc(tx), stats, Some(task))
             }
             Backend::Zenoh(s) => Ingest::new(Sink::Zenoh(s.clone()), stats, None),

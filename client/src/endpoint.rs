@@ -47,7 +47,10 @@ impl FromStr for Endpoint {
     type Err = ClientError;
 
     fn from_str(url: &str) -> Result<Self, Self::Err> {
-        let bad = |reason: &str| ClientError::Endpoint { url: url.to_string(), reason: reason.to_string() };
+        let bad = |reason: &str| ClientError::Endpoint {
+            url: url.to_string(),
+            reason: reason.to_string(),
+        };
         let url_t = url.trim();
         if url_t == "discard" {
             return Ok(Endpoint::Discard);
@@ -55,13 +58,23 @@ impl FromStr for Endpoint {
         for (scheme, client_mode) in [("zenoh-client", true), ("zenoh", false)] {
             if url_t == scheme {
                 return if client_mode {
-                    Err(bad("zenoh-client needs a router locator, e.g. zenoh-client/tcp/HOST:7447"))
+                    Err(bad(
+                        "zenoh-client needs a router locator, e.g. zenoh-client/tcp/HOST:7447",
+                    ))
                 } else {
-                    Ok(Endpoint::Zenoh { connect: Vec::new(), client_mode })
+                    Ok(Endpoint::Zenoh {
+                        connect: Vec::new(),
+                        client_mode,
+                    })
                 };
             }
             if let Some(rest) = url_t.strip_prefix(scheme).and_then(|r| r.strip_prefix('/')) {
-                let connect: Vec<String> = rest.split(',').map(str::trim).filter(|s| !s.is_empty()).map(String::from).collect();
+                let connect: Vec<String> = rest
+                    .split(',')
+                    .map(str::trim)
+                    .filter(|s| !s.is_empty())
+                    .map(String::from)
+                    .collect();
                 if connect.is_empty() {
                     return Err(bad("no Zenoh locator after '/'"));
                 }
@@ -70,7 +83,10 @@ impl FromStr for Endpoint {
                         return Err(bad("a Zenoh locator looks like tcp/HOST:PORT"));
                     }
                 }
-                return Ok(Endpoint::Zenoh { connect, client_mode });
+                return Ok(Endpoint::Zenoh {
+                    connect,
+                    client_mode,
+                });
             }
         }
         let rest = url_t
@@ -82,8 +98,11 @@ impl FromStr for Endpoint {
         if host.is_empty() {
             return Err(bad("missing HOST"));
         }
-        port.parse::<u16>().map_err(|_| bad("PORT is not a number in 0-65535"))?;
-        Ok(Endpoint::Grpc { uri: format!("http://{rest}") })
+        port.parse::<u16>()
+            .map_err(|_| bad("PORT is not a number in 0-65535"))?;
+        Ok(Endpoint::Grpc {
+            uri: format!("http://{rest}"),
+        })
     }
 }
 
@@ -91,9 +110,20 @@ impl fmt::Display for Endpoint {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Endpoint::Grpc { uri } => write!(f, "grpc://{}", uri.trim_start_matches("http://")),
-            Endpoint::Zenoh { connect, client_mode } => {
-                let scheme = if *client_mode { "zenoh-client" } else { "zenoh" };
-                if connect.is_empty() { write!(f, "{scheme}") } else { write!(f, "{scheme}/{}", connect.join(",")) }
+            Endpoint::Zenoh {
+                connect,
+                client_mode,
+            } => {
+                let scheme = if *client_mode {
+                    "zenoh-client"
+                } else {
+                    "zenoh"
+                };
+                if connect.is_empty() {
+                    write!(f, "{scheme}")
+                } else {
+                    write!(f, "{scheme}/{}", connect.join(","))
+                }
             }
             Endpoint::Discard => write!(f, "discard"),
         }
@@ -106,19 +136,51 @@ mod tests {
 
     #[test]
     fn parses_every_form() {
-        assert_eq!("grpc://127.0.0.1:50051".parse::<Endpoint>().unwrap(), Endpoint::Grpc { uri: "http://127.0.0.1:50051".into() });
-        assert_eq!("http://h:1".parse::<Endpoint>().unwrap(), Endpoint::Grpc { uri: "http://h:1".into() });
-        assert_eq!("zenoh".parse::<Endpoint>().unwrap(), Endpoint::Zenoh { connect: vec![], client_mode: false });
         assert_eq!(
-            "zenoh/tcp/127.0.0.1:7447,udp/h:1".parse::<Endpoint>().unwrap(),
-            Endpoint::Zenoh { connect: vec!["tcp/127.0.0.1:7447".into(), "udp/h:1".into()], client_mode: false }
+            "grpc://127.0.0.1:50051".parse::<Endpoint>().unwrap(),
+            Endpoint::Grpc {
+                uri: "http://127.0.0.1:50051".into()
+            }
+        );
+        assert_eq!(
+            "http://h:1".parse::<Endpoint>().unwrap(),
+            Endpoint::Grpc {
+                uri: "http://h:1".into()
+            }
+        );
+        assert_eq!(
+            "zenoh".parse::<Endpoint>().unwrap(),
+            Endpoint::Zenoh {
+                connect: vec![],
+                client_mode: false
+            }
+        );
+        assert_eq!(
+            "zenoh/tcp/127.0.0.1:7447,udp/h:1"
+                .parse::<Endpoint>()
+                .unwrap(),
+            Endpoint::Zenoh {
+                connect: vec!["tcp/127.0.0.1:7447".into(), "udp/h:1".into()],
+                client_mode: false
+            }
         );
         assert_eq!(
             "zenoh-client/tcp/r:7447".parse::<Endpoint>().unwrap(),
-            Endpoint::Zenoh { connect: vec!["tcp/r:7447".into()], client_mode: true }
+            Endpoint::Zenoh {
+                connect: vec!["tcp/r:7447".into()],
+                client_mode: true
+            }
         );
         assert_eq!("discard".parse::<Endpoint>().unwrap(), Endpoint::Discard);
-        for s in ["grpc://h", "grpc://:1", "grpc://h:x", "ftp://h:1", "zenoh/", "zenoh/h:1", "zenoh-client"] {
+        for s in [
+            "grpc://h",
+            "grpc://:1",
+            "grpc://h:x",
+            "ftp://h:1",
+            "zenoh/",
+            "zenoh/h:1",
+            "zenoh-client",
+        ] {
             assert!(s.parse::<Endpoint>().is_err(), "{s}");
         }
         for s in ["grpc://h:1", "zenoh", "zenoh/tcp/a:1", "discard"] {

@@ -4,7 +4,9 @@
 #[derive(Debug, thiserror::Error)]
 pub enum ClientError {
     /// The endpoint URL could not be parsed.
-    #[error("bad endpoint '{url}': {reason} (expected grpc://HOST:PORT, zenoh[/ENDPOINT] or discard)")]
+    #[error(
+        "bad endpoint '{url}': {reason} (expected grpc://HOST:PORT, zenoh[/ENDPOINT] or discard)"
+    )]
     Endpoint {
         /// The URL as given.
         url: String,
@@ -92,7 +94,11 @@ pub enum ClientError {
 impl ClientError {
     /// A gRPC status as an error of operation `op`.
     pub fn rpc(op: &'static str, status: tonic::Status) -> Self {
-        ClientError::Rpc { op, code: status.code(), message: status.message().to_string() }
+        ClientError::Rpc {
+            op,
+            code: status.code(),
+            message: status.message().to_string(),
+        }
     }
 
     /// Whether retrying after a reconnection may help (transport failures, not refusals).
@@ -100,9 +106,14 @@ impl ClientError {
         match self {
             ClientError::Rpc { code, .. } => matches!(
                 code,
-                tonic::Code::Unavailable | tonic::Code::Unknown | tonic::Code::Internal | tonic::Code::Cancelled
+                tonic::Code::Unavailable
+                    | tonic::Code::Unknown
+                    | tonic::Code::Internal
+                    | tonic::Code::Cancelled
             ),
-            ClientError::Connect { .. } | ClientError::Zenoh { .. } | ClientError::Timeout { .. } => true,
+            ClientError::Connect { .. }
+            | ClientError::Zenoh { .. }
+            | ClientError::Timeout { .. } => true,
             _ => false,
         }
     }
@@ -111,14 +122,22 @@ impl ClientError {
 /// Checks a vehicle id the way the service does: 1–128 characters of `[A-Za-z0-9_.-]` (it is also a
 /// Zenoh key chunk).
 pub fn check_vehicle_id(id: &str) -> Result<(), ClientError> {
-    let bad = |reason| Err(ClientError::InvalidId { id: id.to_string(), reason });
+    let bad = |reason| {
+        Err(ClientError::InvalidId {
+            id: id.to_string(),
+            reason,
+        })
+    };
     if id.is_empty() {
         return bad("empty");
     }
     if id.len() > 128 {
         return bad("longer than 128 characters");
     }
-    if !id.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '.' | '-')) {
+    if !id
+        .chars()
+        .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '.' | '-'))
+    {
         return bad("only A-Z a-z 0-9 _ . - are allowed");
     }
     Ok(())

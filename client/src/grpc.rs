@@ -17,7 +17,10 @@ pub const MAX_MESSAGE_BYTES: usize = 16 << 20;
 /// Connects to `uri` (`http://HOST:PORT`), eagerly so that an unreachable service is reported now.
 /// The channel reconnects by itself on later calls after a failure.
 pub async fn connect(uri: &str, connect_timeout: Duration) -> Result<RawClient, ClientError> {
-    let err = |reason: String| ClientError::Connect { endpoint: uri.replacen("http://", "grpc://", 1), reason };
+    let err = |reason: String| ClientError::Connect {
+        endpoint: uri.replacen("http://", "grpc://", 1),
+        reason,
+    };
     let ep = TonicEndpoint::from_shared(uri.to_string())
         .map_err(|e| err(e.to_string()))?
         .connect_timeout(connect_timeout)
@@ -56,28 +59,56 @@ pub fn map_status(op: &'static str, id: &str, status: tonic::Status) -> ClientEr
 
 /// `ListVehicles`.
 pub async fn list(c: &RawClient, prefix: &str) -> Result<Vec<pb::VehicleSummary>, ClientError> {
-    let req = pb::ListVehiclesRequest { id_prefix: prefix.to_string() };
-    let resp = c.clone().list_vehicles(req).await.map_err(|s| ClientError::rpc("ListVehicles", s))?;
+    let req = pb::ListVehiclesRequest {
+        id_prefix: prefix.to_string(),
+    };
+    let resp = c
+        .clone()
+        .list_vehicles(req)
+        .await
+        .map_err(|s| ClientError::rpc("ListVehicles", s))?;
     Ok(resp.into_inner().vehicles)
 }
 
 /// `GetPose`.
 pub async fn get_pose(c: &RawClient, id: &str) -> Result<pb::PoseEstimate, ClientError> {
-    let req = pb::GetPoseRequest { vehicle_id: id.to_string() };
-    let resp = c.clone().get_pose(req).await.map_err(|s| map_status("GetPose", id, s))?;
+    let req = pb::GetPoseRequest {
+        vehicle_id: id.to_string(),
+    };
+    let resp = c
+        .clone()
+        .get_pose(req)
+        .await
+        .map_err(|s| map_status("GetPose", id, s))?;
     Ok(resp.into_inner())
 }
 
 /// `ConfigureVehicle`: whether the vehicle was created.
-pub async fn configure(c: &RawClient, id: &str, config: &pb::VehicleConfig) -> Result<bool, ClientError> {
-    let req = pb::ConfigureVehicleRequest { vehicle_id: id.to_string(), config: Some(config.clone()) };
-    let resp = c.clone().configure_vehicle(req).await.map_err(|s| ClientError::rpc("ConfigureVehicle", s))?;
+pub async fn configure(
+    c: &RawClient,
+    id: &str,
+    config: &pb::VehicleConfig,
+) -> Result<bool, ClientError> {
+    let req = pb::ConfigureVehicleRequest {
+        vehicle_id: id.to_string(),
+        config: Some(config.clone()),
+    };
+    let resp = c
+        .clone()
+        .configure_vehicle(req)
+        .await
+        .map_err(|s| ClientError::rpc("ConfigureVehicle", s))?;
     Ok(resp.into_inner().created)
 }
 
 /// `ResetVehicle`.
 pub async fn reset(c: &RawClient, id: &str) -> Result<(), ClientError> {
-    let req = pb::ResetVehicleRequest { vehicle_id: id.to_string() };
-    c.clone().reset_vehicle(req).await.map_err(|s| map_status("ResetVehicle", id, s))?;
+    let req = pb::ResetVehicleRequest {
+        vehicle_id: id.to_string(),
+    };
+    c.clone()
+        .reset_vehicle(req)
+        .await
+        .map_err(|s| map_status("ResetVehicle", id, s))?;
     Ok(())
 }

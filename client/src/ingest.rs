@@ -69,7 +69,8 @@ impl IngestStats {
 
     fn ack(&self, ack: &pb::IngestAck) {
         self.acked.fetch_add(1, Ordering::Relaxed);
-        let status = pb::IngestStatus::try_from(ack.status).unwrap_or(pb::IngestStatus::Unspecified);
+        let status =
+            pb::IngestStatus::try_from(ack.status).unwrap_or(pb::IngestStatus::Unspecified);
         if status == pb::IngestStatus::Accepted {
             self.accepted.fetch_add(1, Ordering::Relaxed);
             self.ok.fetch_add(1, Ordering::Relaxed);
@@ -123,8 +124,14 @@ impl IngestSender {
             Sink::Grpc(tx) => {
                 let sequence = self.seq.fetch_add(1, Ordering::Relaxed);
                 let len = payload_len(&payload);
-                let env = pb::SensorEnvelope { vehicle_id: vehicle_id.to_string(), sequence, payload: Some(payload) };
-                tx.send(env).await.map_err(|_| ClientError::Closed("ingest stream"))?;
+                let env = pb::SensorEnvelope {
+                    vehicle_id: vehicle_id.to_string(),
+                    sequence,
+                    payload: Some(payload),
+                };
+                tx.send(env)
+                    .await
+                    .map_err(|_| ClientError::Closed("ingest stream"))?;
                 self.stats.bytes.fetch_add(len as u64, Ordering::Relaxed);
             }
             Sink::Zenoh(session) => {
@@ -139,16 +146,26 @@ impl IngestSender {
                     .await;
                 if let Err(e) = put {
                     self.stats.error(format!("zenoh put: {e}"));
-                    return Err(ClientError::Zenoh { op: "put", key, reason: e.to_string() });
+                    return Err(ClientError::Zenoh {
+                        op: "put",
+                        key,
+                        reason: e.to_string(),
+                    });
                 }
                 self.stats.bytes.fetch_add(len as u64, Ordering::Relaxed);
                 self.stats.accepted.fetch_add(1, Ordering::Relaxed);
             }
             Sink::Discard => {
                 // Encode like a transport would, then drop: the cost of producing the load.
-                let env = pb::SensorEnvelope { vehicle_id: vehicle_id.to_string(), sequence: 0, payload: Some(payload) };
+                let env = pb::SensorEnvelope {
+                    vehicle_id: vehicle_id.to_string(),
+                    sequence: 0,
+                    payload: Some(payload),
+                };
                 let body = env.encode_to_vec();
-                self.stats.bytes.fetch_add(body.len() as u64, Ordering::Relaxed);
+                self.stats
+                    .bytes
+                    .fetch_add(body.len() as u64, Ordering::Relaxed);
                 self.stats.accepted.fetch_add(1, Ordering::Relaxed);
                 self.stats.acked.fetch_add(1, Ordering::Relaxed);
                 self.stats.ok.fetch_add(1, Ordering::Relaxed);
@@ -182,7 +199,14 @@ pub struct Ingest {
 
 impl Ingest {
     pub(crate) fn new(sink: Sink, stats: Arc<IngestStats>, task: Option<JoinHandle<()>>) -> Self {
-        Self { sender: IngestSender { sink, seq: Arc::new(AtomicU64::new(0)), stats }, task }
+        Self {
+            sender: IngestSender {
+                sink,
+                seq: Arc::new(AtomicU64::new(0)),
+                stats,
+            },
+            task,
+        }
     }
 
     /// A sender (cloneable; the stream closes when the `Ingest` and every sender are dropped).
@@ -240,7 +264,9 @@ pub(crate) fn spawn_grpc_driver(
                             }
                             Ok(None) if closed.load(Ordering::Acquire) => return,
                             Ok(None) => break "the service ended the ingest stream".to_string(),
-                            Err(status) => break format!("{:?}: {}", status.code(), status.message()),
+                            Err(status) => {
+                                break format!("{:?}: {}", status.code(), status.message());
+                            }
                         }
                     }
                 }

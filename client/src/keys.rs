@@ -89,7 +89,14 @@ mod tests {
 
     #[test]
     fn keys_round_trip() {
-        for leaf in [Leaf::Imu, Leaf::Gnss, Leaf::Camera, Leaf::Config, Leaf::Pose, Leaf::Health] {
+        for leaf in [
+            Leaf::Imu,
+            Leaf::Gnss,
+            Leaf::Camera,
+            Leaf::Config,
+            Leaf::Pose,
+            Leaf::Health,
+        ] {
             assert_eq!(split(&vehicle_key("uav-7", leaf)), Some(("uav-7", leaf)));
         }
         assert_eq!(split(&pose_latest_key("a")), None);

@@ -41,9 +41,18 @@ pub struct Recording {
 impl Recording {
     /// Wraps a schedule (see [`crate::schedule::build`]). Fails when it holds no IMU.
     pub fn new(messages: Vec<TimedMessage>) -> Result<Self, ClientError> {
-        let has_config = matches!(messages.first().map(|m| &m.payload), Some(Payload::Config(_)));
-        let sensor = messages.iter().filter(|m| !matches!(m.payload, Payload::Config(_)));
-        let t0_ns = sensor.clone().map(|m| m.last_t_ns - m.offset_ns).next().unwrap_or(0);
+        let has_config = matches!(
+            messages.first().map(|m| &m.payload),
+            Some(Payload::Config(_))
+        );
+        let sensor = messages
+            .iter()
+            .filter(|m| !matches!(m.payload, Payload::Config(_)));
+        let t0_ns = sensor
+            .clone()
+            .map(|m| m.last_t_ns - m.offset_ns)
+            .next()
+            .unwrap_or(0);
         let imu_due: Vec<(i64, i64)> = sensor
             .clone()
             .filter(|m| matches!(m.payload, Payload::Imu(_)))
@@ -53,8 +62,19 @@ impl Recording {
             return Err(ClientError::Closed("load recording without IMU"));
         }
         let span = sensor.map(|m| m.offset_ns).max().unwrap_or(0);
-        let step = imu_due.windows(2).map(|w| w[1].0 - w[0].0).filter(|d| *d > 0).min().unwrap_or(5_000_000);
-        Ok(Self { messages, t0_ns, period_ns: span + step, imu_due, has_config })
+        let step = imu_due
+            .windows(2)
+            .map(|w| w[1].0 - w[0].0)
+            .filter(|d| *d > 0)
+            .min()
+            .unwrap_or(5_000_000);
+        Ok(Self {
+            messages,
+            t0_ns,
+            period_ns: span + step,
+            imu_due,
+            has_config,
+        })
     }
 
     /// Span of one lap, ns.
@@ -77,7 +97,11 @@ impl Recording {
         let (lap, i) = ((j - base) / per_lap, (j - base) % per_lap);
         let m = &self.messages[base + i];
         let shift = lap as i64 * self.period_ns;
-        let payload = if lap == 0 { m.payload.clone() } else { shift_payload(&m.payload, shift) };
+        let payload = if lap == 0 {
+            m.payload.clone()
+        } else {
+            shift_payload(&m.payload, shift)
+        };
         (shift + m.offset_ns, payload)
     }
 
@@ -98,7 +122,9 @@ impl Recording {
         let lap = rel.div_euclid(self.period_ns);
         let base = rel - lap * self.period_ns;
         let i = self.imu_due.partition_point(|(t, _)| *t < base);
-        self.imu_due.get(i).map(|(_, due)| lap * self.period_ns + due)
+        self.imu_due
+            .get(i)
+            .map(|(_, due)| lap * self.period_ns + due)
     }
 }
 
@@ -227,7 +253,12 @@ pub struct LoadOutcome {
 impl LoadOutcome {
     /// Messages refused, lost or failed, over messages sent.
     pub fn error_rate(&self) -> f64 {
-        let refused: u64 = self.statuses.iter().filter(|(k, _)| k.as_str() != "OK").map(|(_, v)| v).sum();
+        let refused: u64 = self
+            .statuses
+            .iter()
+            .filter(|(k, _)| k.as_str() != "OK")
+            .map(|(_, v)| v)
+            .sum();
         let failed: u64 = self.errors.values().sum();
         (refused + failed + self.unacked) as f64 / (self.sent.max(1)) as f64
     }
@@ -242,10 +273,16 @@ impl LoadOutcome {
         let mut out = Vec::new();
         let lag99 = Duration::from_nanos(self.send_lag_ns.value_at_quantile(0.99));
         if lag99 > t.max_p99_send_lag {
-            out.push(format!("p99 send lag {lag99:?} > {:?} (sender held back)", t.max_p99_send_lag));
+            out.push(format!(
+                "p99 send lag {lag99:?} > {:?} (sender held back)",
+                t.max_p99_send_lag
+            ));
         }
         if self.sent < self.scheduled {
-            out.push(format!("only {} of {} scheduled messages sent", self.sent, self.scheduled));
+            out.push(format!(
+                "only {} of {} scheduled messages sent",
+                self.sent, self.scheduled
+            ));
         }
         let rate = self.error_rate();
         if rate > t.max_error_rate {
@@ -256,14 +293,20 @@ impl LoadOutcome {
             if self.latency_ns.is_empty() {
                 out.push("no pose received".into());
             } else if p99 > t.max_p99_latency {
-                out.push(format!("p99 ingest-to-pose latency {p99:?} > {:?}", t.max_p99_latency));
+                out.push(format!(
+                    "p99 ingest-to-pose latency {p99:?} > {:?}",
+                    t.max_p99_latency
+                ));
             }
             let silent = self.params.vehicles - self.vehicles_with_poses.min(self.params.vehicles);
             if silent > 0 {
                 out.push(format!("{silent} vehicles produced no pose"));
             }
             if self.vehicles_behind > 0 {
-                out.push(format!("{} vehicles' poses ended more than {:?} behind their inputs", self.vehicles_behind, t.max_p99_latency));
+                out.push(format!(
+                    "{} vehicles' poses ended more than {:?} behind their inputs",
+                    self.vehicles_behind, t.max_p99_latency
+                ));
             }
         }
         out
@@ -279,7 +322,8 @@ struct VehicleSeen {
 
 fn histogram() -> Histogram<u64> {
     // 1 µs … 1 h at 3 significant figures.
-    Histogram::new_with_bounds(1_000, 3_600_000_000_000, 3).expect("constant, valid histogram bounds")
+    Histogram::new_with_bounds(1_000, 3_600_000_000_000, 3)
+        .expect("constant, valid histogram bounds")
 }
 
 /// Vehicle `k`'s start offset, ns.
@@ -289,11 +333,18 @@ fn start_offset_ns(k: usize, params: &LoadParams) -> i64 {
 }
 
 /// Runs one load test against `client`.
-pub async fn run(client: &Client, rec: Arc<Recording>, params: LoadParams, live: Arc<Live>) -> Result<LoadOutcome, ClientError> {
+pub async fn run(
+    client: &Client,
+    rec: Arc<Recording>,
+    params: LoadParams,
+    live: Arc<Live>,
+) -> Result<LoadOutcome, ClientError> {
     let expects_poses = !matches!(client.endpoint(), crate::Endpoint::Discard);
     let sel = Selector::prefix(params.id_prefix.clone()).with_decimation(params.decimation);
     let mut poses = client.watch_poses(sel.clone()).await?;
-    let mut health = client.watch_health(Selector::prefix(params.id_prefix.clone())).await?;
+    let mut health = client
+        .watch_health(Selector::prefix(params.id_prefix.clone()))
+        .await?;
     // Zenoh subscriptions need a moment to propagate before the first put.
     if client.zenoh_session().is_some() {
         tokio::time::sleep(Duration::from_millis(300)).await;
@@ -308,7 +359,15 @@ pub async fn run(client: &Client, rec: Arc<Recording>, params: LoadParams, live:
     let mut senders: Vec<JoinHandle<(Histogram<u64>, Vec<(usize, i64)>, u64)>> = Vec::new();
     for (s, ing) in ingests.iter().enumerate() {
         let vehicles: Vec<usize> = (s..params.vehicles).step_by(streams).collect();
-        senders.push(tokio::spawn(send_loop(ing.sender(), Arc::clone(&rec), params.clone(), vehicles, start, duration_ns, Arc::clone(&live))));
+        senders.push(tokio::spawn(send_loop(
+            ing.sender(),
+            Arc::clone(&rec),
+            params.clone(),
+            vehicles,
+            start,
+            duration_ns,
+            Arc::clone(&live),
+        )));
     }
 
     // Receive poses and health until the senders are done plus the drain time.
@@ -321,7 +380,8 @@ pub async fn run(client: &Client, rec: Arc<Recording>, params: LoadParams, live:
     let mut send_results = None;
     let mut drain_deadline: Option<tokio::time::Instant> = None;
     loop {
-        let deadline = drain_deadline.unwrap_or_else(|| tokio::time::Instant::now() + Duration::from_secs(3600));
+        let deadline = drain_deadline
+            .unwrap_or_else(|| tokio::time::Instant::now() + Duration::from_secs(3600));
         tokio::select! {
             r = &mut senders_done, if send_results.is_none() => {
                 send_results = Some(r);
@@ -364,7 +424,13 @@ pub async fn run(client: &Client, rec: Arc<Recording>, params: LoadParams, live:
                 }
                 send_elapsed = send_elapsed.max(Duration::from_nanos(elapsed_ns));
             }
-            Err(e) => return Err(ClientError::Closed(if e.is_panic() { "load sender panicked" } else { "load sender cancelled" })),
+            Err(e) => {
+                return Err(ClientError::Closed(if e.is_panic() {
+                    "load sender panicked"
+                } else {
+                    "load sender cancelled"
+                }));
+            }
         }
     }
     let mut stats = Vec::new();
@@ -398,12 +464,20 @@ pub async fn run(client: &Client, rec: Arc<Recording>, params: LoadParams, live:
             *outcome.errors.entry(k).or_default() += v;
         }
         if matches!(client.endpoint(), crate::Endpoint::Grpc { .. }) {
-            outcome.unacked += s.sent.load(Ordering::Relaxed).saturating_sub(s.acked.load(Ordering::Relaxed));
+            outcome.unacked += s
+                .sent
+                .load(Ordering::Relaxed)
+                .saturating_sub(s.acked.load(Ordering::Relaxed));
         }
     }
     let bound_ns = Thresholds::default().max_p99_latency.as_nanos() as i64;
-    outcome.vehicles_behind =
-        seen.iter().filter(|s| s.last_pose_t_ns.is_some_and(|t| s.last_sent_t_ns - t > bound_ns)).count();
+    outcome.vehicles_behind = seen
+        .iter()
+        .filter(|s| {
+            s.last_pose_t_ns
+                .is_some_and(|t| s.last_sent_t_ns - t > bound_ns)
+        })
+        .count();
     Ok(outcome)
 }
 
@@ -443,7 +517,10 @@ async fn send_loop(
     duration_ns: i64,
     live: Arc<Live>,
 ) -> (Histogram<u64>, Vec<(usize, i64)>, u64) {
-    let ids: Vec<String> = vehicles.iter().map(|k| vehicle_id(&params.id_prefix, *k)).collect();
+    let ids: Vec<String> = vehicles
+        .iter()
+        .map(|k| vehicle_id(&params.id_prefix, *k))
+        .collect();
     let mut last_sent = vec![0i64; vehicles.len()];
     let mut lag = histogram();
     // (due ns since start, local vehicle index, message index)
@@ -463,7 +540,12 @@ async fn send_loop(
             _ => None,
         };
         let sent = sender.send(&ids[i], payload).await;
-        let _ = lag.record((Instant::now().saturating_duration_since(scheduled).as_nanos() as u64).max(1));
+        let _ = lag.record(
+            (Instant::now()
+                .saturating_duration_since(scheduled)
+                .as_nanos() as u64)
+                .max(1),
+        );
         match sent {
             Ok(()) => {
                 live.sent.fetch_add(1, Ordering::Relaxed);

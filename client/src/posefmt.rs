@@ -17,7 +17,8 @@ pub fn csv_header() -> String {
 }
 
 fn v3(v: &Option<pb::Vector3>) -> Vector3<f64> {
-    v.as_ref().map_or_else(Vector3::zeros, |v| Vector3::new(v.x, v.y, v.z))
+    v.as_ref()
+        .map_or_else(Vector3::zeros, |v| Vector3::new(v.x, v.y, v.z))
 }
 
 fn mode(m: i32) -> Mode {
@@ -35,9 +36,13 @@ pub fn to_output(p: &pb::PoseEstimate, frame: Option<&LocalFrame>) -> Option<Pos
     let pos = p.position.as_ref()?;
     let lla = Lla::try_from(pos).ok()?;
     let q = p.nav_from_body.as_ref()?;
-    let nav_from_body = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z));
+    let nav_from_body =
+        UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z));
     let pos_ned_m = frame.map_or_else(Vector3::zeros, |f| f.lla_to_ned(&lla));
-    let health = Health { mode: mode(p.mode), ..Health::default() };
+    let health = Health {
+        mode: mode(p.mode),
+        ..Health::default()
+    };
     Some(PoseOutput {
         t_ns: p.t_ns,
         lla,
@@ -58,7 +63,11 @@ pub fn to_output(p: &pb::PoseEstimate, frame: Option<&LocalFrame>) -> Option<Pos
 /// One CSV row (no newline), or `None` for a pose without position/attitude.
 pub fn csv_row(p: &pb::PoseEstimate) -> Option<String> {
     let o = to_output(p, None)?;
-    Some(format!("{},{}", uavnav_estimator::format::csv_row(&o), p.vehicle_id))
+    Some(format!(
+        "{},{}",
+        uavnav_estimator::format::csv_row(&o),
+        p.vehicle_id
+    ))
 }
 
 /// One TUM line in the local NED frame `frame` (no newline).

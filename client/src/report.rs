@@ -96,7 +96,14 @@ pub struct Extra {
 fn percentiles(h: &hdrhistogram::Histogram<u64>) -> Vec<LatencyPoint> {
     PERCENTILES
         .iter()
-        .map(|p| LatencyPoint { percentage: *p, latency: if h.is_empty() { 0 } else { h.value_at_percentile(*p) } })
+        .map(|p| LatencyPoint {
+            percentage: *p,
+            latency: if h.is_empty() {
+                0
+            } else {
+                h.value_at_percentile(*p)
+            },
+        })
         .collect()
 }
 
@@ -109,7 +116,11 @@ impl Report {
         Report {
             count: o.sent,
             total: o.send_elapsed.as_nanos() as u64,
-            average: if h.is_empty() { 0 } else { h.mean().round() as u64 },
+            average: if h.is_empty() {
+                0
+            } else {
+                h.mean().round() as u64
+            },
             fastest: if h.is_empty() { 0 } else { h.min() },
             slowest: if h.is_empty() { 0 } else { h.max() },
             rps: o.rps(),
@@ -144,17 +155,64 @@ impl Report {
         let ms = |ns: u64| format!("{:.2} ms", ns as f64 / 1e6);
         let x = &self.uavnav;
         let mut s = String::new();
-        let _ = writeln!(s, "Summary ({} vehicles, {:.1} s, {}, camera {}):", x.vehicles, x.duration_s, x.target, if x.camera { "on" } else { "off" });
-        let _ = writeln!(s, "  Messages sent:     {} of {} scheduled ({:.1} msg/s, {:.2} Mbit/s)", self.count, x.scheduled, self.rps, x.mbps);
-        let _ = writeln!(s, "  Poses received:    {} ({:.1}/s, decimation {})", x.poses, x.poses_per_s, x.decimation.max(1));
-        let _ = writeln!(s, "  Vehicles w/ poses: {} of {} ({} behind at the end)", x.vehicles_with_poses, x.vehicles, x.vehicles_behind);
-        let _ = writeln!(s, "  Latency (ingest to pose): fastest {}  average {}  slowest {}", ms(self.fastest), ms(self.average), ms(self.slowest));
+        let _ = writeln!(
+            s,
+            "Summary ({} vehicles, {:.1} s, {}, camera {}):",
+            x.vehicles,
+            x.duration_s,
+            x.target,
+            if x.camera { "on" } else { "off" }
+        );
+        let _ = writeln!(
+            s,
+            "  Messages sent:     {} of {} scheduled ({:.1} msg/s, {:.2} Mbit/s)",
+            self.count, x.scheduled, self.rps, x.mbps
+        );
+        let _ = writeln!(
+            s,
+            "  Poses received:    {} ({:.1}/s, decimation {})",
+            x.poses,
+            x.poses_per_s,
+            x.decimation.max(1)
+        );
+        let _ = writeln!(
+            s,
+            "  Vehicles w/ poses: {} of {} ({} behind at the end)",
+            x.vehicles_with_poses, x.vehicles, x.vehicles_behind
+        );
+        let _ = writeln!(
+            s,
+            "  Latency (ingest to pose): fastest {}  average {}  slowest {}",
+            ms(self.fastest),
+            ms(self.average),
+            ms(self.slowest)
+        );
         let _ = writeln!(s, "  {:>8}  {:>12}  {:>12}", "pct", "latency", "send lag");
-        for (l, g) in self.latency_distribution.iter().zip(&x.send_lag_distribution) {
-            let _ = writeln!(s, "  {:>7}%  {:>12}  {:>12}", l.percentage, ms(l.latency), ms(g.latency));
+        for (l, g) in self
+            .latency_distribution
+            .iter()
+            .zip(&x.send_lag_distribution)
+        {
+            let _ = writeln!(
+                s,
+                "  {:>7}%  {:>12}  {:>12}",
+                l.percentage,
+                ms(l.latency),
+                ms(g.latency)
+            );
         }
-        let _ = writeln!(s, "  Status codes: {}", fmt_map(&self.status_code_distribution));
-        let _ = writeln!(s, "  Errors:       {} (unacked {}, error rate {:.4})", fmt_map(&self.error_distribution), x.unacked, x.error_rate);
+        let _ = writeln!(
+            s,
+            "  Status codes: {}",
+            fmt_map(&self.status_code_distribution)
+        );
+        let _ = writeln!(
+            s,
+            "  Errors:       {} (unacked {}, error rate {:.4})",
+            fmt_map(&self.error_distribution),
+            x.unacked,
+            x.error_rate
+        );
         let c = &x.service;
         let _ = writeln!(
             s,
@@ -174,5 +232,8 @@ fn fmt_map(m: &BTreeMap<String, u64>) -> String {
     if m.is_empty() {
         return "none".into();
     }
-    m.iter().map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>().join(" ")
+    m.iter()
+        .map(|(k, v)| format!("{k}={v}"))
+        .collect::<Vec<_>>()
+        .join(" ")
 }

@@ -42,7 +42,11 @@ pub struct Batcher {
 impl Batcher {
     /// A batcher with `params`.
     pub fn new(params: ScheduleParams) -> Self {
-        Self { params, t0_ns: None, imu: Vec::new() }
+        Self {
+            params,
+            t0_ns: None,
+            imu: Vec::new(),
+        }
     }
 
     /// Sensor time of the first event (the schedule's zero).
@@ -63,7 +67,11 @@ impl Batcher {
             }
             other => {
                 out.extend(self.flush_imu(t0));
-                out.push(TimedMessage { offset_ns: other.t_ns() - t0, last_t_ns: other.t_ns(), payload: Payload::from(other) });
+                out.push(TimedMessage {
+                    offset_ns: other.t_ns() - t0,
+                    last_t_ns: other.t_ns(),
+                    payload: Payload::from(other),
+                });
             }
         }
         out
@@ -79,7 +87,11 @@ impl Batcher {
         let last = self.imu.last()?.t_ns;
         let batch = pb::ImuBatch::from(self.imu.as_slice());
         self.imu.clear();
-        Some(TimedMessage { offset_ns: last - t0, last_t_ns: last, payload: Payload::Imu(batch) })
+        Some(TimedMessage {
+            offset_ns: last - t0,
+            last_t_ns: last,
+            payload: Payload::Imu(batch),
+        })
     }
 }
 
@@ -97,7 +109,14 @@ pub fn build<I: IntoIterator<Item = SensorEvent>>(
     out.extend(b.finish());
     if let Some(c) = config {
         let t0 = b.t0_ns().unwrap_or(0);
-        out.insert(0, TimedMessage { offset_ns: 0, last_t_ns: t0, payload: Payload::Config(c.clone()) });
+        out.insert(
+            0,
+            TimedMessage {
+                offset_ns: 0,
+                last_t_ns: t0,
+                payload: Payload::Config(c.clone()),
+            },
+        );
     }
     out
 }
@@ -126,7 +145,11 @@ mod tests {
     use super::*;
 
     fn imu(t_ns: i64) -> SensorEvent {
-        SensorEvent::Imu(ImuSample { t_ns, gyro_radps: Vector3::zeros(), accel_mps2: Vector3::new(0.0, 0.0, -9.8) })
+        SensorEvent::Imu(ImuSample {
+            t_ns,
+            gyro_radps: Vector3::zeros(),
+            accel_mps2: Vector3::new(0.0, 0.0, -9.8),
+        })
     }
 
     #[test]
@@ -143,8 +166,20 @@ mod tests {
             fix_type: uavnav_core::FixType::Fix3d,
             num_sats: 9,
         });
-        let evs = vec![imu(1_000), imu(1_005), imu(1_010), imu(1_015), imu(1_020), gnss, imu(1_030)];
-        let msgs = build(Some(&pb::VehicleConfig::default()), evs, &ScheduleParams { imu_batch: 4 });
+        let evs = vec![
+            imu(1_000),
+            imu(1_005),
+            imu(1_010),
+            imu(1_015),
+            imu(1_020),
+            gnss,
+            imu(1_030),
+        ];
+        let msgs = build(
+            Some(&pb::VehicleConfig::default()),
+            evs,
+            &ScheduleParams { imu_batch: 4 },
+        );
         let shape: Vec<(i64, &str, usize)> = msgs
             .iter()
             .map(|m| match &m.payload {
@@ -154,6 +189,15 @@ mod tests {
                 Payload::Camera(_) => (m.offset_ns, "camera", 1),
             })
             .collect();
-        assert_eq!(shape, vec![(0, "config", 1), (15, "imu", 4), (20, "imu", 1), (25, "gnss", 1), (30, "imu", 1)]);
+        assert_eq!(
+            shape,
+            vec![
+                (0, "config", 1),
+                (15, "imu", 4),
+                (20, "imu", 1),
+                (25, "gnss", 1),
+                (30, "imu", 1)
+            ]
+        );
     }
 }

@@ -34,17 +34,26 @@ pub struct Selector {
 impl Selector {
     /// Every vehicle.
     pub fn all() -> Self {
-        Self { all: true, ..Self::default() }
+        Self {
+            all: true,
+            ..Self::default()
+        }
     }
 
     /// These vehicles.
     pub fn ids<I: IntoIterator<Item = S>, S: Into<String>>(ids: I) -> Self {
-        Self { ids: ids.into_iter().map(Into::into).collect(), ..Self::default() }
+        Self {
+            ids: ids.into_iter().map(Into::into).collect(),
+            ..Self::default()
+        }
     }
 
     /// Vehicles whose id starts with `prefix`.
     pub fn prefix(prefix: impl Into<String>) -> Self {
-        Self { prefix: prefix.into(), ..Self::default() }
+        Self {
+            prefix: prefix.into(),
+            ..Self::default()
+        }
     }
 
     /// Keeps one message in `n` per vehicle.
@@ -60,7 +69,9 @@ impl Selector {
 
     /// Whether vehicle `id` is selected.
     pub fn matches(&self, id: &str) -> bool {
-        self.all || (!self.prefix.is_empty() && id.starts_with(&self.prefix)) || self.ids.iter().any(|i| i == id)
+        self.all
+            || (!self.prefix.is_empty() && id.starts_with(&self.prefix))
+            || self.ids.iter().any(|i| i == id)
     }
 
     /// The gRPC request.
@@ -126,7 +137,13 @@ impl<T: Send + 'static> Watch<T> {
                 };
                 attempt += 1;
                 let Some(delay) = backoff.delay(attempt) else {
-                    let _ = tx.send(Err(ClientError::GaveUp { op, attempts: attempt - 1, last })).await;
+                    let _ = tx
+                        .send(Err(ClientError::GaveUp {
+                            op,
+                            attempts: attempt - 1,
+                            last,
+                        }))
+                        .await;
                     return;
                 };
                 tracing::warn!(op, attempt, error = %last, "subscription lost; resubscribing in {delay:?}");
@@ -134,7 +151,11 @@ impl<T: Send + 'static> Watch<T> {
                 tokio::time::sleep(delay).await;
             }
         });
-        Self { rx, task, reconnects }
+        Self {
+            rx,
+            task,
+            reconnects,
+        }
     }
 
     /// The next item; `None` once the watch has ended, `Some(Err)` for a permanent failure.

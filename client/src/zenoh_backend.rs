@@ -23,10 +23,11 @@ pub fn encoding(full_name: &str) -> Encoding {
 pub fn session_config(connect: &[String], client_mode: bool) -> Result<zenoh::Config, ClientError> {
     let mut z = zenoh::Config::default();
     let set = |z: &mut zenoh::Config, key: &str, value: String| {
-        z.insert_json5(key, &value).map_err(|e| ClientError::Connect {
-            endpoint: format!("zenoh/{}", connect.join(",")),
-            reason: format!("zenoh config {key}={value}: {e}"),
-        })
+        z.insert_json5(key, &value)
+            .map_err(|e| ClientError::Connect {
+                endpoint: format!("zenoh/{}", connect.join(",")),
+                reason: format!("zenoh config {key}={value}: {e}"),
+            })
     };
     if client_mode {
         set(&mut z, "mode", "\"client\"".into())?;
@@ -43,11 +44,22 @@ pub fn session_config(connect: &[String], client_mode: bool) -> Result<zenoh::Co
 
 /// Opens a session; with explicit locators, waits (up to `timeout`) until a peer or router is
 /// connected so that an unreachable service is reported instead of silently publishing nowhere.
-pub async fn open(connect: &[String], client_mode: bool, timeout: Duration) -> Result<Session, ClientError> {
-    let endpoint = if connect.is_empty() { "zenoh".to_string() } else { format!("zenoh/{}", connect.join(",")) };
+pub async fn open(
+    connect: &[String],
+    client_mode: bool,
+    timeout: Duration,
+) -> Result<Session, ClientError> {
+    let endpoint = if connect.is_empty() {
+        "zenoh".to_string()
+    } else {
+        format!("zenoh/{}", connect.join(","))
+    };
     let session = zenoh::open(session_config(connect, client_mode)?)
         .await
-        .map_err(|e| ClientError::Connect { endpoint: endpoint.clone(), reason: e.to_string() })?;
+        .map_err(|e| ClientError::Connect {
+            endpoint: endpoint.clone(),
+            reason: e.to_string(),
+        })?;
     if connect.is_empty() {
         return Ok(session);
     }
@@ -60,30 +72,48 @@ pub async fn open(connect: &[String], client_mode: bool, timeout: Duration) -> R
         }
         if tokio::time::Instant::now() >= deadline {
             let _ = session.close().await;
-            return Err(ClientError::Connect { endpoint, reason: format!("no Zenoh peer or router reachable within {timeout:?}") });
+            return Err(ClientError::Connect {
+                endpoint,
+                reason: format!("no Zenoh peer or router reachable within {timeout:?}"),
+            });
         }
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
 }
 
 /// Queries `key` and decodes every reply as `M`.
-pub async fn query<M: Message + Default>(session: &Session, key: &str, timeout: Duration) -> Result<Vec<M>, ClientError> {
+pub async fn query<M: Message + Default>(
+    session: &Session,
+    key: &str,
+    timeout: Duration,
+) -> Result<Vec<M>, ClientError> {
     let replies = session
         .get(key)
         .timeout(timeout)
         .await
-        .map_err(|e| ClientError::Zenoh { op: "get", key: key.to_string(), reason: e.to_string() })?;
+        .map_err(|e| ClientError::Zenoh {
+            op: "get",
+            key: key.to_string(),
+            reason: e.to_string(),
+        })?;
     let mut out = Vec::new();
     while let Ok(reply) = replies.recv_async().await {
         match reply.into_result() {
             Ok(sample) => {
                 let bytes = sample.payload().to_bytes();
-                let m = M::decode(bytes.as_ref()).map_err(|source| ClientError::Decode { what: key.to_string(), source })?;
+                let m = M::decode(bytes.as_ref()).map_err(|source| ClientError::Decode {
+                    what: key.to_string(),
+                    source,
+                })?;
                 out.push(m);
             }
             Err(e) => {
                 let reason = String::from_utf8_lossy(&e.payload().to_bytes()).into_owned();
-                return Err(ClientError::Zenoh { op: "get", key: key.to_string(), reason });
+                return Err(ClientError::Zenoh {
+                    op: "get",
+                    key: key.to_string(),
+                    reason,
+                });
             }
         }
     }
@@ -91,7 +121,11 @@ pub async fn query<M: Message + Default>(session: &Session, key: &str, timeout: 
 }
 
 /// The vehicle list from every service instance answering (merged, sorted by id).
-pub async fn list(session: &Session, prefix: &str, timeout: Duration) -> Result<Vec<pb::VehicleSummary>, ClientError> {
+pub async fn list(
+    session: &Session,
+    prefix: &str,
+    timeout: Duration,
+) -> Result<Vec<pb::VehicleSummary>, ClientError> {
     let answers: Vec<pb::ListVehiclesResponse> = query(session, keys::VEHICLES, timeout).await?;
     let mut by_id = BTreeMap::new();
     for v in answers.into_iter().flat_map(|a| a.vehicles) {
@@ -103,20 +137,35 @@ pub async fn list(session: &Session, prefix: &str, timeout: Duration) -> Result<
 }
 
 /// The latest pose of `id` (the newest if several services answer).
-pub async fn get_pose(session: &Session, id: &str, timeout: Duration) -> Result<pb::PoseEstimate, ClientError> {
+pub async fn get_pose(
+    session: &Session,
+    id: &str,
+    timeout: Duration,
+) -> Result<pb::PoseEstimate, ClientError> {
     let poses: Vec<pb::PoseEstimate> = query(session, &keys::pose_latest_key(id), timeout).await?;
-    poses.into_iter().max_by_key(|p| p.t_ns).ok_or_else(|| ClientError::NotFound(id.to_string()))
+    poses
+        .into_iter()
+        .max_by_key(|p| p.t_ns)
+        .ok_or_else(|| ClientError::NotFound(id.to_string()))
 }
 
 /// Publishes a configuration on the vehicle's `config` key.
-pub async fn configure(session: &Session, id: &str, config: &pb::VehicleConfig) -> Result<(), ClientError> {
+pub async fn configure(
+    session: &Session,
+    id: &str,
+    config: &pb::VehicleConfig,
+) -> Result<(), ClientError> {
     let key = keys::vehicle_key(id, Leaf::Config);
     session
         .put(&key, config.encode_to_vec())
         .encoding(encoding(Leaf::Config.message_name()))
         .congestion_control(zenoh::qos::CongestionControl::Block)
         .await
-        .map_err(|e| ClientError::Zenoh { op: "put", key, reason: e.to_string() })
+        .map_err(|e| ClientError::Zenoh {
+            op: "put",
+            key,
+            reason: e.to_string(),
+        })
 }
 
 /// The subscription key for a selector on `leaf` (one vehicle: its key; else every vehicle, filtered here).
@@ -140,26 +189,39 @@ where
     let sub = session
         .declare_subscriber(&key)
         .await
-        .map_err(|e| ClientError::Zenoh { op: "subscribe", key: key.clone(), reason: e.to_string() })?;
+        .map_err(|e| ClientError::Zenoh {
+            op: "subscribe",
+            key: key.clone(),
+            reason: e.to_string(),
+        })?;
     let sel = sel.clone();
     let every = sel.decimation.max(1) as u64;
     let state = (sub, sel, BTreeMap::<String, u64>::new());
-    Ok(Box::pin(futures::stream::unfold(state, move |(sub, sel, mut counts)| async move {
-        loop {
-            let sample = sub.recv_async().await.ok()?;
-            let key = sample.key_expr().as_str();
-            let Some((id, l)) = keys::split(key) else { continue };
-            if l != leaf || !sel.matches(id) {
-                continue;
+    Ok(Box::pin(futures::stream::unfold(
+        state,
+        move |(sub, sel, mut counts)| async move {
+            loop {
+                let sample = sub.recv_async().await.ok()?;
+                let key = sample.key_expr().as_str();
+                let Some((id, l)) = keys::split(key) else {
+                    continue;
+                };
+                if l != leaf || !sel.matches(id) {
+                    continue;
+                }
+                let n = counts.entry(id.to_string()).or_default();
+                *n += 1;
+                if (*n - 1) % every != 0 {
+                    continue;
+                }
+                let item = M::decode(sample.payload().to_bytes().as_ref()).map_err(|source| {
+                    ClientError::Decode {
+                        what: key.to_string(),
+                        source,
+                    }
+                });
+                return Some((item, (sub, sel, counts)));
             }
-            let n = counts.entry(id.to_string()).or_default();
-            *n += 1;
-            if (*n - 1) % every != 0 {
-                continue;
-            }
-            let item = M::decode(sample.payload().to_bytes().as_ref())
-                .map_err(|source| ClientError::Decode { what: key.to_string(), source });
-            return Some((item, (sub, sel, counts)));
-        }
-    })))
+        },
+    )))
 }

@@ -3,8 +3,8 @@
 
 use std::path::PathBuf;
 
-use uavnav_core::{FilterProfile, VehicleConfig};
 use uavnav_client::pb;
+use uavnav_core::{FilterProfile, VehicleConfig};
 
 use crate::common::{CliError, CliResult};
 use crate::endpoint::{DEFAULT_URL, block_on, client_err, connect};
@@ -39,17 +39,23 @@ fn parse_profile(s: &str) -> Result<FilterProfile, String> {
 }
 
 /// The configuration the arguments describe.
-pub fn load_config(dataset: Option<&PathBuf>, scenario: Option<&PathBuf>) -> Result<VehicleConfig, CliError> {
+pub fn load_config(
+    dataset: Option<&PathBuf>,
+    scenario: Option<&PathBuf>,
+) -> Result<VehicleConfig, CliError> {
     if let Some(path) = dataset {
         let ds = uavnav_dataset::Dataset::open(path).map_err(CliError::input)?;
         return Ok(ds.config().clone());
     }
     if let Some(path) = scenario {
         let s = crate::simulate::load_scenario(path)?;
-        let flight = uavnav_sim::Flight::new(&s).map_err(|e| CliError::input(anyhow::anyhow!("{}: {e}", path.display())))?;
+        let flight = uavnav_sim::Flight::new(&s)
+            .map_err(|e| CliError::input(anyhow::anyhow!("{}: {e}", path.display())))?;
         return Ok(flight.vehicle_config());
     }
-    Err(CliError::input(anyhow::anyhow!("give --dataset or --scenario")))
+    Err(CliError::input(anyhow::anyhow!(
+        "give --dataset or --scenario"
+    )))
 }
 
 /// Runs the command; prints `created VEHICLE`, `reconfigured VEHICLE` or (Zenoh) `published VEHICLE`.
@@ -64,7 +70,10 @@ pub fn run(args: Args) -> CliResult {
     let wire = pb::VehicleConfig::from(&config);
     block_on(async move {
         let client = connect(&args.from).await?;
-        let created = client.configure(&args.vehicle, &wire).await.map_err(client_err)?;
+        let created = client
+            .configure(&args.vehicle, &wire)
+            .await
+            .map_err(client_err)?;
         match created {
             Some(true) => println!("created {}", args.vehicle),
             Some(false) => println!("reconfigured {}", args.vehicle),

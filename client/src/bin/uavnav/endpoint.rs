@@ -10,9 +10,6 @@ use crate::common::{CliError, CliResult};
 /// Default service URL of `--from` / `--to`.
 pub const DEFAULT_URL: &str = "grpc://127.0.0.1:50051";
 
-/// Help text of the URL arguments.
-pub const URL_HELP: &str = "grpc://HOST:PORT, zenoh (scouting), zenoh/tcp/HOST:PORT[,…] (peer), zenoh-client/tcp/HOST:PORT (via a router)";
-
 /// Runs an async command on a fresh multi-threaded runtime.
 pub fn block_on<F: Future<Output = CliResult>>(f: F) -> CliResult {
     let rt = tokio::runtime::Builder::new_multi_thread()
@@ -30,21 +27,33 @@ pub fn parse(url: &str) -> Result<Endpoint, CliError> {
 /// Parses and connects (unreachable = exit 1).
 pub async fn connect(url: &str) -> Result<Client, CliError> {
     let ep = parse(url)?;
-    Client::connect(&ep, ConnectOptions::default()).await.map_err(client_err)
+    Client::connect(&ep, ConnectOptions::default())
+        .await
+        .map_err(client_err)
 }
 
 /// Maps a client error to its exit code: the caller's fault (bad id, unknown vehicle, refused
 /// argument) = 2, anything else = 1.
 pub fn client_err(e: ClientError) -> CliError {
     let input = match &e {
-        ClientError::Endpoint { .. } | ClientError::InvalidId { .. } | ClientError::NotFound(_) | ClientError::Unsupported { .. } => true,
+        ClientError::Endpoint { .. }
+        | ClientError::InvalidId { .. }
+        | ClientError::NotFound(_)
+        | ClientError::Unsupported { .. } => true,
         ClientError::Rpc { code, .. } => matches!(
             code,
-            tonic::Code::InvalidArgument | tonic::Code::NotFound | tonic::Code::FailedPrecondition | tonic::Code::OutOfRange
+            tonic::Code::InvalidArgument
+                | tonic::Code::NotFound
+                | tonic::Code::FailedPrecondition
+                | tonic::Code::OutOfRange
         ),
         _ => false,
     };
-    if input { CliError::input(e) } else { CliError::runtime(e) }
+    if input {
+        CliError::input(e)
+    } else {
+        CliError::runtime(e)
+    }
 }
 
 /// Mode name as in the `estimate` CSV.

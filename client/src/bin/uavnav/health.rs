@@ -44,7 +44,17 @@ pub struct Args {
 fn header() -> String {
     format!(
         "{:<20} {:<18} {:>7} {:>6} {:>6} {:>9} {:>9} {:>8} {:>6} {:>6} {:>7}",
-        "vehicle_id", "mode", "imu_hz", "gnss_hz", "cam_hz", "p99_ms", "accepted", "rejected", "late", "shed", "dropped"
+        "vehicle_id",
+        "mode",
+        "imu_hz",
+        "gnss_hz",
+        "cam_hz",
+        "p99_ms",
+        "accepted",
+        "rejected",
+        "late",
+        "shed",
+        "dropped"
     )
 }
 
@@ -83,7 +93,11 @@ pub fn run(args: Args) -> CliResult {
     block_on(async move {
         let client = connect(&args.from).await?;
         let known = client.list_vehicles("").await.map_err(client_err)?;
-        let sel = if args.all { Selector::all() } else { Selector::ids(args.vehicle.clone()) };
+        let sel = if args.all {
+            Selector::all()
+        } else {
+            Selector::ids(args.vehicle.clone())
+        };
         if sel.is_empty() {
             println!("ok: {} serving {} vehicles", client.endpoint(), known.len());
             return check_ages(&args, &known);
@@ -118,7 +132,10 @@ pub fn run(args: Args) -> CliResult {
         }
         for id in &args.vehicle {
             if !latest.contains_key(id) {
-                eprintln!("uavnav: no health report from '{id}' within {:.1} s", args.wait);
+                eprintln!(
+                    "uavnav: no health report from '{id}' within {:.1} s",
+                    args.wait
+                );
             }
         }
         check_ages(&args, &known)
@@ -127,7 +144,9 @@ pub fn run(args: Args) -> CliResult {
 
 /// `--max-age`: every selected vehicle must be known and fed recently.
 fn check_ages(args: &Args, known: &[pb::VehicleSummary]) -> CliResult {
-    let Some(max_age) = args.max_age else { return Ok(()) };
+    let Some(max_age) = args.max_age else {
+        return Ok(());
+    };
     let now = unix_now_ns();
     let mut stale = Vec::new();
     let selected: Vec<&str> = if args.all || args.vehicle.is_empty() {
@@ -146,5 +165,9 @@ fn check_ages(args: &Args, known: &[pb::VehicleSummary]) -> CliResult {
             }
         }
     }
-    if stale.is_empty() { Ok(()) } else { Err(CliError::Target(stale.join("; "))) }
+    if stale.is_empty() {
+        Ok(())
+    } else {
+        Err(CliError::Target(stale.join("; ")))
+    }
 }

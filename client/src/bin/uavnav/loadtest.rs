@@ -100,7 +100,10 @@ pub fn parse_duration(s: &str) -> Result<Duration, String> {
     } else {
         (s, 1.0)
     };
-    let v: f64 = num.trim().parse().map_err(|_| format!("'{s}' is not a duration (e.g. 30s, 2m, 500ms)"))?;
+    let v: f64 = num
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{s}' is not a duration (e.g. 30s, 2m, 500ms)"))?;
     if !v.is_finite() || v <= 0.0 {
         return Err(format!("'{s}': the duration must be positive"));
     }
@@ -109,7 +112,9 @@ pub fn parse_duration(s: &str) -> Result<Duration, String> {
 
 /// The stream every vehicle replays.
 fn build_recording(args: &Args, camera: bool) -> Result<Recording, CliError> {
-    let params = ScheduleParams { imu_batch: args.imu_batch.max(1) };
+    let params = ScheduleParams {
+        imu_batch: args.imu_batch.max(1),
+    };
     let messages = match &args.recording {
         Some(path) => {
             let ds = uavnav_dataset::Dataset::open(path).map_err(CliError::input)?;
@@ -128,12 +133,18 @@ fn build_recording(args: &Args, camera: bool) -> Result<Recording, CliError> {
             schedule::build(Some(&wire), events, &params)
         }
         None => {
-            let mut s = uavnav_sim::Scenario::from_toml_str(SMOKE_SCENARIO)
-                .map_err(|e| CliError::runtime(anyhow::anyhow!("built-in smoke scenario: {e:?}")))?;
-            let cap = if camera { MAX_CAMERA_FLIGHT_S } else { MAX_FLIGHT_S };
+            let mut s = uavnav_sim::Scenario::from_toml_str(SMOKE_SCENARIO).map_err(|e| {
+                CliError::runtime(anyhow::anyhow!("built-in smoke scenario: {e:?}"))
+            })?;
+            let cap = if camera {
+                MAX_CAMERA_FLIGHT_S
+            } else {
+                MAX_FLIGHT_S
+            };
             s.duration_s = (args.duration.as_secs_f64() + 2.0).clamp(5.0, cap);
             s.camera.enabled = camera;
-            let flight = uavnav_sim::Flight::new(&s).map_err(|e| CliError::runtime(anyhow::anyhow!("simulating the flight: {e}")))?;
+            let flight = uavnav_sim::Flight::new(&s)
+                .map_err(|e| CliError::runtime(anyhow::anyhow!("simulating the flight: {e}")))?;
             let wire = pb::VehicleConfig::from(&flight.vehicle_config());
             let events: Vec<_> = flight
                 .events()
@@ -152,7 +163,13 @@ fn run_tag() -> String {
 }
 
 /// Runs one stage with a progress bar.
-async fn stage(client: &Client, rec: &Arc<Recording>, args: &Args, vehicles: usize, prefix: String) -> Result<LoadOutcome, CliError> {
+async fn stage(
+    client: &Client,
+    rec: &Arc<Recording>,
+    args: &Args,
+    vehicles: usize,
+    prefix: String,
+) -> Result<LoadOutcome, CliError> {
     let params = LoadParams {
         vehicles,
         duration: args.duration,
@@ -190,7 +207,9 @@ async fn stage(client: &Client, rec: &Arc<Recording>, args: &Args, vehicles: usi
 /// Runs the command.
 pub fn run(args: Args) -> CliResult {
     if args.vehicles == 0 {
-        return Err(CliError::input(anyhow::anyhow!("--vehicles must be at least 1")));
+        return Err(CliError::input(anyhow::anyhow!(
+            "--vehicles must be at least 1"
+        )));
     }
     let camera = !args.no_camera;
     let rec = Arc::new(build_recording(&args, camera)?);
@@ -210,12 +229,26 @@ pub fn run(args: Args) -> CliResult {
         let target = client.endpoint().to_string();
         let tag = run_tag();
         if !args.ramp {
-            let o = stage(&client, &rec, &args, args.vehicles, format!("{}{tag}-", args.id_prefix)).await?;
+            let o = stage(
+                &client,
+                &rec,
+                &args,
+                args.vehicles,
+                format!("{}{tag}-", args.id_prefix),
+            )
+            .await?;
             let report = Report::new(&o, &target, camera, &thresholds);
             print!("{}", report.table());
-            write_json(args.json.as_ref(), &serde_json::to_value(&report).map_err(CliError::runtime)?)?;
+            write_json(
+                args.json.as_ref(),
+                &serde_json::to_value(&report).map_err(CliError::runtime)?,
+            )?;
             client.close().await;
-            return if report.uavnav.kept_up { Ok(()) } else { Err(CliError::Target(report.uavnav.failures.join("; "))) };
+            return if report.uavnav.kept_up {
+                Ok(())
+            } else {
+                Err(CliError::Target(report.uavnav.failures.join("; ")))
+            };
         }
         let (best, stages) = ramp(&client, &rec, &args, &tag, &target, camera, &thresholds).await?;
         write_json(
@@ -225,10 +258,16 @@ pub fn run(args: Args) -> CliResult {
         client.close().await;
         match best {
             Some(n) => {
-                println!("sustained in real time: {n} vehicles (camera {})", if camera { "on" } else { "off" });
+                println!(
+                    "sustained in real time: {n} vehicles (camera {})",
+                    if camera { "on" } else { "off" }
+                );
                 Ok(())
             }
-            None => Err(CliError::Target(format!("not even {} vehicles were sustained in real time", args.vehicles))),
+            None => Err(CliError::Target(format!(
+                "not even {} vehicles were sustained in real time",
+                args.vehicles
+            ))),
         }
     })
 }
@@ -247,18 +286,37 @@ async fn ramp(
     let mut n = args.vehicles;
     let mut stages = Vec::new();
     for k in 0.. {
-        let o = stage(client, rec, args, n, format!("{}{tag}s{k}-", args.id_prefix)).await?;
+        let o = stage(
+            client,
+            rec,
+            args,
+            n,
+            format!("{}{tag}s{k}-", args.id_prefix),
+        )
+        .await?;
         let report = Report::new(&o, target, camera, t);
-        let p99_ms = report.latency_distribution.iter().find(|p| p.percentage == 99.0).map_or(0.0, |p| p.latency as f64 / 1e6);
+        let p99_ms = report
+            .latency_distribution
+            .iter()
+            .find(|p| p.percentage == 99.0)
+            .map_or(0.0, |p| p.latency as f64 / 1e6);
         println!(
             "stage {k}: {n:>6} vehicles  {:>10.0} msg/s  p99 {:>9.2} ms  {}",
             report.rps,
             p99_ms,
-            if report.uavnav.kept_up { "kept up".to_string() } else { format!("behind: {}", report.uavnav.failures.join("; ")) }
+            if report.uavnav.kept_up {
+                "kept up".to_string()
+            } else {
+                format!("behind: {}", report.uavnav.failures.join("; "))
+            }
         );
         let kept_up = report.uavnav.kept_up;
         stages.push(serde_json::to_value(&report).map_err(CliError::runtime)?);
-        if kept_up { lo = Some(n) } else { hi = Some(n) }
+        if kept_up {
+            lo = Some(n)
+        } else {
+            hi = Some(n)
+        }
         n = match (lo, hi) {
             (Some(l), None) if l >= args.ramp_max => break,
             (Some(l), None) => (l * 2).min(args.ramp_max),
@@ -276,6 +334,8 @@ async fn ramp(
 fn write_json(path: Option<&PathBuf>, value: &serde_json::Value) -> CliResult {
     let Some(path) = path else { return Ok(()) };
     let text = serde_json::to_string_pretty(value).map_err(CliError::runtime)?;
-    std::fs::write(path, text + "\n").with_context(|| format!("cannot write {}", path.display())).map_err(CliError::runtime)?;
+    std::fs::write(path, text + "\n")
+        .with_context(|| format!("cannot write {}", path.display()))
+        .map_err(CliError::runtime)?;
     Ok(())
 }

@@ -52,8 +52,13 @@ pub struct McapSink {
 impl McapSink {
     /// Creates the file.
     pub fn create(path: &Path) -> Result<Self, CliError> {
-        let writer = McapWriter::create(path, &McapOptions::default()).map_err(CliError::runtime)?;
-        Ok(Self { path: path.to_path_buf(), writer, frames: BTreeMap::new() })
+        let writer =
+            McapWriter::create(path, &McapOptions::default()).map_err(CliError::runtime)?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            writer,
+            frames: BTreeMap::new(),
+        })
     }
 
     fn err(&self, e: impl std::fmt::Display) -> CliError {
@@ -63,23 +68,38 @@ impl McapSink {
     /// Records a pose (log time = now).
     pub fn pose(&mut self, p: &pb::PoseEstimate) -> Result<(), CliError> {
         if !self.frames.contains_key(&p.vehicle_id) {
-            if let Some(lla) = p.position.as_ref().and_then(|g| uavnav_core::Lla::try_from(g).ok()) {
-                self.frames.insert(p.vehicle_id.clone(), LocalFrame::new(lla));
+            if let Some(lla) = p
+                .position
+                .as_ref()
+                .and_then(|g| uavnav_core::Lla::try_from(g).ok())
+            {
+                self.frames
+                    .insert(p.vehicle_id.clone(), LocalFrame::new(lla));
             }
         }
         let frame = self.frames.get(&p.vehicle_id);
-        self.writer.write_pose(&p.vehicle_id, p, unix_now_ns(), frame).map_err(CliError::runtime)
+        self.writer
+            .write_pose(&p.vehicle_id, p, unix_now_ns(), frame)
+            .map_err(CliError::runtime)
     }
 
     /// Records a health report (log time = now).
     pub fn health(&mut self, h: &pb::VehicleHealth) -> Result<(), CliError> {
-        self.writer.write_health(&h.vehicle_id, h, unix_now_ns()).map_err(CliError::runtime)
+        self.writer
+            .write_health(&h.vehicle_id, h, unix_now_ns())
+            .map_err(CliError::runtime)
     }
 
     /// Records one raw message of `vehicle_id` on `leaf` (protobuf bytes as received); publish
     /// time = the message's sensor time, log time = `log_time_ns`. Undecodable messages are skipped
     /// (the service refuses them too) and counted by the caller.
-    pub fn raw(&mut self, vehicle_id: &str, leaf: Leaf, bytes: &[u8], log_time_ns: i64) -> Result<bool, CliError> {
+    pub fn raw(
+        &mut self,
+        vehicle_id: &str,
+        leaf: Leaf,
+        bytes: &[u8],
+        log_time_ns: i64,
+    ) -> Result<bool, CliError> {
         use prost::Message;
         let w = &mut self.writer;
         let r = match leaf {
@@ -95,7 +115,11 @@ impl McapSink {
                 Err(_) => return Ok(false),
             },
             Leaf::Camera => match pb::CameraFrame::decode(bytes) {
-                Ok(pb::CameraFrame { t_ns, image: Some(image), .. }) => w.write_message(vehicle_id, Stream::Camera, &image, t_ns, log_time_ns),
+                Ok(pb::CameraFrame {
+                    t_ns,
+                    image: Some(image),
+                    ..
+                }) => w.write_message(vehicle_id, Stream::Camera, &image, t_ns, log_time_ns),
                 _ => return Ok(false),
             },
             Leaf::Config => match pb::VehicleConfig::decode(bytes) {
@@ -124,9 +148,11 @@ impl McapSink {
 pub fn has_config(ds: &uavnav_dataset::Dataset) -> bool {
     match ds.format() {
         uavnav_dataset::Format::Asl => true,
-        uavnav_dataset::Format::Mcap => uavnav_dataset::mcap_io::reader::McapDataset::open(ds.path(), Some(ds.vehicle_id()))
-            .map(|m| m.has_config())
-            .unwrap_or(false),
+        uavnav_dataset::Format::Mcap => {
+            uavnav_dataset::mcap_io::reader::McapDataset::open(ds.path(), Some(ds.vehicle_id()))
+                .map(|m| m.has_config())
+                .unwrap_or(false)
+        }
     }
 }
 
@@ -165,9 +191,17 @@ pub fn run(args: Args) -> CliResult {
                 }
             }
         } else {
-            eprintln!("uavnav: warning: over gRPC only poses and health are recorded (inputs need --from zenoh…)");
-            let mut poses = client.watch_poses(Selector::all()).await.map_err(client_err)?;
-            let mut health = client.watch_health(Selector::all()).await.map_err(client_err)?;
+            eprintln!(
+                "uavnav: warning: over gRPC only poses and health are recorded (inputs need --from zenoh…)"
+            );
+            let mut poses = client
+                .watch_poses(Selector::all())
+                .await
+                .map_err(client_err)?;
+            let mut health = client
+                .watch_health(Selector::all())
+                .await
+                .map_err(client_err)?;
             loop {
                 let idle_at = last + idle.unwrap_or(FOREVER);
                 tokio::select! {

@@ -50,8 +50,12 @@ pub struct Args {
 }
 
 /// Opens a fresh reader of one vehicle's events (called once per copy, on a blocking thread).
-pub type OpenEvents =
-    Arc<dyn Fn() -> anyhow::Result<Box<dyn Iterator<Item = anyhow::Result<uavnav_core::SensorEvent>> + Send>> + Send + Sync>;
+pub type OpenEvents = Arc<
+    dyn Fn() -> anyhow::Result<
+            Box<dyn Iterator<Item = anyhow::Result<uavnav_core::SensorEvent>> + Send>,
+        > + Send
+        + Sync,
+>;
 
 /// One recorded vehicle stream.
 pub struct Stream {
@@ -68,12 +72,19 @@ pub struct Stream {
 pub fn open_streams(path: &std::path::Path) -> Result<Vec<Stream>, CliError> {
     use uavnav_dataset::{Dataset, Format, ReadOptions};
     let vehicles: Vec<Option<String>> = match Format::of_path(path) {
-        Format::Mcap => uavnav_dataset::mcap_io::reader::vehicles(path).map_err(CliError::input)?.into_iter().map(Some).collect(),
+        Format::Mcap => uavnav_dataset::mcap_io::reader::vehicles(path)
+            .map_err(CliError::input)?
+            .into_iter()
+            .map(Some)
+            .collect(),
         Format::Asl => vec![None],
     };
     let mut out = Vec::new();
     for vehicle in vehicles {
-        let options = ReadOptions { vehicle: vehicle.clone(), ..ReadOptions::default() };
+        let options = ReadOptions {
+            vehicle: vehicle.clone(),
+            ..ReadOptions::default()
+        };
         let ds = Dataset::open_with(path, &options).map_err(CliError::input)?;
         let config = crate::record::has_config(&ds).then(|| pb::VehicleConfig::from(ds.config()));
         let p = path.to_path_buf();
@@ -83,10 +94,17 @@ pub fn open_streams(path: &std::path::Path) -> Result<Vec<Stream>, CliError> {
                 Box::new(ds.events()?.map(|e| e.map_err(anyhow::Error::from)));
             Ok(events)
         });
-        out.push(Stream { vehicle_id: ds.vehicle_id().to_string(), config, open });
+        out.push(Stream {
+            vehicle_id: ds.vehicle_id().to_string(),
+            config,
+            open,
+        });
     }
     if out.is_empty() {
-        return Err(CliError::input(anyhow::anyhow!("{}: no vehicle in the recording", path.display())));
+        return Err(CliError::input(anyhow::anyhow!(
+            "{}: no vehicle in the recording",
+            path.display()
+        )));
     }
     Ok(out)
 }
@@ -107,7 +125,10 @@ pub fn run(args: Args) -> CliResult {
     }
     let streams = open_streams(&args.dataset)?;
     if args.id_prefix.is_some() && streams.len() > 1 {
-        return Err(CliError::input(anyhow::anyhow!("--id-prefix needs a single-vehicle recording ({} vehicles here)", streams.len())));
+        return Err(CliError::input(anyhow::anyhow!(
+            "--id-prefix needs a single-vehicle recording ({} vehicles here)",
+            streams.len()
+        )));
     }
     block_on(async move {
         let client = connect(&args.to).await?;
@@ -125,7 +146,11 @@ pub fn run(args: Args) -> CliResult {
                 uavnav_client::error::check_vehicle_id(&id).map_err(CliError::input)?;
                 let offset = Duration::from_secs_f64(args.stagger.max(0.0) * k_global as f64);
                 k_global += 1;
-                let config = if args.no_config { None } else { s.config.clone() };
+                let config = if args.no_config {
+                    None
+                } else {
+                    s.config.clone()
+                };
                 tasks.push(tokio::spawn(copy(
                     ingest.sender(),
                     id,
@@ -142,7 +167,11 @@ pub fn run(args: Args) -> CliResult {
             match t.await {
                 Ok(Ok(())) => {}
                 Ok(Err(e)) => first_err = first_err.or(Some(e)),
-                Err(e) => first_err = first_err.or(Some(CliError::runtime(anyhow::anyhow!("replay task failed: {e}")))),
+                Err(e) => {
+                    first_err = first_err.or(Some(CliError::runtime(anyhow::anyhow!(
+                        "replay task failed: {e}"
+                    ))))
+                }
             }
         }
         let stats = ingest.finish(Duration::from_secs(30)).await;
@@ -199,7 +228,10 @@ async fn copy(
         }
     });
     if let Some(c) = config {
-        sender.send(&id, pb::sensor_envelope::Payload::Config(c)).await.map_err(client_err)?;
+        sender
+            .send(&id, pb::sensor_envelope::Payload::Config(c))
+            .await
+            .map_err(client_err)?;
     }
     while let Some(m) = rx.recv().await {
         let m = m.map_err(CliError::input)?;

@@ -24,13 +24,23 @@ pub struct Args {
 pub fn run(args: Args) -> CliResult {
     block_on(async move {
         let client = connect(&args.from).await?;
-        let list = client.list_vehicles(&args.prefix).await.map_err(client_err)?;
+        let list = client
+            .list_vehicles(&args.prefix)
+            .await
+            .map_err(client_err)?;
         let now = unix_now_ns();
         if !args.json {
-            println!("{:<24} {:<20} {:>16} {:>12} {:>10}", "vehicle_id", "mode", "last_t_s", "input_age_s", "configured");
+            println!(
+                "{:<24} {:<20} {:>16} {:>12} {:>10}",
+                "vehicle_id", "mode", "last_t_s", "input_age_s", "configured"
+            );
         }
         for v in &list {
-            let age_s = if v.last_input_wall_ns > 0 { (now - v.last_input_wall_ns) as f64 * 1e-9 } else { f64::NAN };
+            let age_s = if v.last_input_wall_ns > 0 {
+                (now - v.last_input_wall_ns) as f64 * 1e-9
+            } else {
+                f64::NAN
+            };
             let t_s = v.last_t_ns as f64 * 1e-9;
             if args.json {
                 let line = serde_json::json!({
@@ -39,7 +49,14 @@ pub fn run(args: Args) -> CliResult {
                 });
                 println!("{line}");
             } else {
-                println!("{:<24} {:<20} {:>16.3} {:>12.3} {:>10}", v.vehicle_id, mode_name(v.mode), t_s, age_s, v.configured);
+                println!(
+                    "{:<24} {:<20} {:>16.3} {:>12.3} {:>10}",
+                    v.vehicle_id,
+                    mode_name(v.mode),
+                    t_s,
+                    age_s,
+                    v.configured
+                );
             }
         }
         eprintln!("uavnav: {} vehicles at {}", list.len(), client.endpoint());

@@ -71,14 +71,23 @@ impl Out {
             writeln!(w, "{}", posefmt::csv_header()).map_err(CliError::runtime)?;
             return Ok(Out::Csv(w));
         };
-        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .unwrap_or("")
+            .to_ascii_lowercase();
         if ext == "mcap" {
             return Ok(Out::Mcap(crate::record::McapSink::create(path)?));
         }
         if ext != "csv" && ext != "tum" && ext != "txt" {
-            return Err(CliError::input(anyhow::anyhow!("--out {}: expected .csv, .tum or .mcap", path.display())));
+            return Err(CliError::input(anyhow::anyhow!(
+                "--out {}: expected .csv, .tum or .mcap",
+                path.display()
+            )));
         }
-        let f = std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display())).map_err(CliError::runtime)?;
+        let f = std::fs::File::create(path)
+            .with_context(|| format!("cannot create {}", path.display()))
+            .map_err(CliError::runtime)?;
         let mut w: Box<dyn Write + Send> = Box::new(std::io::BufWriter::new(f));
         if ext == "csv" {
             writeln!(w, "{}", posefmt::csv_header()).map_err(CliError::runtime)?;
@@ -96,8 +105,16 @@ impl Out {
                 }
             }
             Out::Tum(w, frames) => {
-                let Some(lla) = p.position.as_ref().and_then(|g| uavnav_core::Lla::try_from(g).ok()) else { return Ok(()) };
-                let frame = frames.entry(p.vehicle_id.clone()).or_insert_with(|| LocalFrame::new(lla));
+                let Some(lla) = p
+                    .position
+                    .as_ref()
+                    .and_then(|g| uavnav_core::Lla::try_from(g).ok())
+                else {
+                    return Ok(());
+                };
+                let frame = frames
+                    .entry(p.vehicle_id.clone())
+                    .or_insert_with(|| LocalFrame::new(lla));
                 if let Some(line) = posefmt::tum_line(p, frame) {
                     writeln!(w, "{line}").map_err(CliError::runtime)?;
                 }
@@ -150,7 +167,16 @@ pub fn run(args: Args) -> CliResult {
         let client = connect(&args.from).await?;
         let sel = selector(&args);
         let mut poses = client.watch_poses(sel.clone()).await.map_err(client_err)?;
-        let mut health = if args.health { Some(client.watch_health(sel.with_decimation(1)).await.map_err(client_err)?) } else { None };
+        let mut health = if args.health {
+            Some(
+                client
+                    .watch_health(sel.with_decimation(1))
+                    .await
+                    .map_err(client_err)?,
+            )
+        } else {
+            None
+        };
         let stop = tokio::time::sleep(args.duration.map_or(FOREVER, Duration::from_secs_f64));
         tokio::pin!(stop);
         let idle = args.idle_exit.map(Duration::from_secs_f64);
