@@ -111,7 +111,10 @@ impl CameraModel {
 
     /// Whether a pixel lies inside the image.
     pub fn contains(&self, px: &Point2<f64>) -> bool {
-        px.x >= 0.0 && px.y >= 0.0 && px.x <= (self.width - 1) as f64 && px.y <= (self.height - 1) as f64
+        px.x >= 0.0
+            && px.y >= 0.0
+            && px.x <= (self.width - 1) as f64
+            && px.y <= (self.height - 1) as f64
     }
 }
 
@@ -128,7 +131,12 @@ mod tests {
             fy: 457.296,
             cx: 367.215,
             cy: 248.375,
-            distortion: Distortion::RadTan { k1: -0.28340811, k2: 0.07395907, p1: 0.00019359, p2: 1.76187114e-05 },
+            distortion: Distortion::RadTan {
+                k1: -0.28340811,
+                k2: 0.07395907,
+                p1: 0.00019359,
+                p2: 1.76187114e-05,
+            },
         }
     }
 

@@ -47,7 +47,10 @@ pub struct GnssConfig {
 
 impl Default for GnssConfig {
     fn default() -> Self {
-        Self { rate_hz: 5.0, lever_arm_body_m: Vector3::zeros() }
+        Self {
+            rate_hz: 5.0,
+            lever_arm_body_m: Vector3::zeros(),
+        }
     }
 }
 
@@ -88,7 +91,9 @@ impl std::str::FromStr for FilterProfile {
         match s {
             "eskf" => Ok(FilterProfile::Eskf),
             "paper" => Ok(FilterProfile::Paper),
-            other => Err(format!("unknown filter profile '{other}' (expected eskf or paper)")),
+            other => Err(format!(
+                "unknown filter profile '{other}' (expected eskf or paper)"
+            )),
         }
     }
 }

@@ -36,7 +36,11 @@ pub struct Lla {
 impl Lla {
     /// From degrees (the edge unit) and metres.
     pub fn from_deg(lat_deg: f64, lon_deg: f64, alt_m: f64) -> Self {
-        Self { lat_rad: lat_deg.to_radians(), lon_rad: lon_deg.to_radians(), alt_m }
+        Self {
+            lat_rad: lat_deg.to_radians(),
+            lon_rad: lon_deg.to_radians(),
+            alt_m,
+        }
     }
 
     /// Latitude in degrees.
@@ -81,8 +85,16 @@ pub fn ecef_to_lla(x: &Vector3<f64>) -> Lla {
     let p = (x.x * x.x + x.y * x.y).sqrt();
     if p < 1e-9 {
         // On the polar axis.
-        let lat = if x.z >= 0.0 { std::f64::consts::FRAC_PI_2 } else { -std::f64::consts::FRAC_PI_2 };
-        return Lla { lat_rad: lat, lon_rad: 0.0, alt_m: x.z.abs() - WGS84_B };
+        let lat = if x.z >= 0.0 {
+            std::f64::consts::FRAC_PI_2
+        } else {
+            -std::f64::consts::FRAC_PI_2
+        };
+        return Lla {
+            lat_rad: lat,
+            lon_rad: 0.0,
+            alt_m: x.z.abs() - WGS84_B,
+        };
     }
     let ep2 = WGS84_E2 / (1.0 - WGS84_E2);
     let theta = (x.z * WGS84_A).atan2(p * WGS84_B);
@@ -92,10 +104,18 @@ pub fn ecef_to_lla(x: &Vector3<f64>) -> Lla {
     for _ in 0..3 {
         let n = radius_prime_vertical(lat);
         let (sl, cl) = lat.sin_cos();
-        alt = if cl.abs() > 1e-3 { p / cl - n } else { x.z / sl - n * (1.0 - WGS84_E2) };
+        alt = if cl.abs() > 1e-3 {
+            p / cl - n
+        } else {
+            x.z / sl - n * (1.0 - WGS84_E2)
+        };
         lat = (x.z / p / (1.0 - WGS84_E2 * n / (n + alt))).atan();
     }
-    Lla { lat_rad: lat, lon_rad: lon, alt_m: alt }
+    Lla {
+        lat_rad: lat,
+        lon_rad: lon,
+        alt_m: alt,
+    }
 }
 
 /// `C_e^n`: rotation taking ECEF vectors into NED at (lat, lon).
@@ -103,9 +123,15 @@ pub fn ned_from_ecef(lat_rad: f64, lon_rad: f64) -> Matrix3<f64> {
     let (sl, cl) = lat_rad.sin_cos();
     let (so, co) = lon_rad.sin_cos();
     Matrix3::new(
-        -sl * co, -sl * so, cl, //
-        -so, co, 0.0, //
-        -cl * co, -cl * so, -sl,
+        -sl * co,
+        -sl * so,
+        cl, //
+        -so,
+        co,
+        0.0, //
+        -cl * co,
+        -cl * so,
+        -sl,
     )
 }
 

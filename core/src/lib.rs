@@ -27,8 +27,8 @@ pub mod sensors;
 pub mod truth;
 
 pub use camera::{CameraModel, Distortion};
-pub use egomotion::{Egomotion, EgomotionSolver, MotionPrior};
 pub use config::{CameraConfig, FilterProfile, GnssConfig, ImuConfig, VehicleConfig};
+pub use egomotion::{Egomotion, EgomotionSolver, MotionPrior};
 pub use geodesy::{Lla, LocalFrame};
 pub use sensors::{CameraFrame, FixType, GnssFix, ImageFormat, ImuSample, SensorEvent};
 pub use truth::TruthSample;

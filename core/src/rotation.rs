@@ -39,9 +39,16 @@ mod tests {
         let e = euler_zyx(&q);
         assert!((e - Vector3::new(0.1, -0.2, 2.5)).norm() < 1e-12);
         // ZYX order: yaw applied last.
-        let r = Matrix3::from(nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), 2.5))
-            * Matrix3::from(nalgebra::Rotation3::from_axis_angle(&Vector3::y_axis(), -0.2))
-            * Matrix3::from(nalgebra::Rotation3::from_axis_angle(&Vector3::x_axis(), 0.1));
+        let r = Matrix3::from(nalgebra::Rotation3::from_axis_angle(
+            &Vector3::z_axis(),
+            2.5,
+        )) * Matrix3::from(nalgebra::Rotation3::from_axis_angle(
+            &Vector3::y_axis(),
+            -0.2,
+        )) * Matrix3::from(nalgebra::Rotation3::from_axis_angle(
+            &Vector3::x_axis(),
+            0.1,
+        ));
         assert!((q.to_rotation_matrix().matrix() - r).norm() < 1e-12);
     }
 

@@ -23,10 +23,10 @@
 mod runner;
 
 pub use runner::{
-    DEFAULT_MAX_HELD_EVENTS, DEFAULT_VISION_DELAY_NS, RunnerError, RunnerParams, Step, VehicleRunner, VisionDone,
-    VisionJob, VisionStats,
+    DEFAULT_MAX_HELD_EVENTS, DEFAULT_VISION_DELAY_NS, RunnerError, RunnerParams, Step,
+    VehicleRunner, VisionDone, VisionJob, VisionStats,
 };
-pub use uavnav_estimator::{Estimator, EstimatorParams, Health, Mode, PoseOutput};
-pub use uavnav_vision::{FrontEnd, VisionParams};
 #[doc(no_inline)]
 pub use uavnav_core::MotionPrior;
+pub use uavnav_estimator::{Estimator, EstimatorParams, Health, Mode, PoseOutput};
+pub use uavnav_vision::{FrontEnd, VisionParams};

@@ -3,8 +3,8 @@
 
 use std::collections::VecDeque;
 
-use uavnav_core::rng::Rng;
 use uavnav_core::SensorEvent;
+use uavnav_core::rng::Rng;
 use uavnav_runner::{PoseOutput, RunnerParams, VehicleRunner, VisionDone, VisionJob};
 use uavnav_sim::{Flight, Scenario};
 
@@ -22,7 +22,11 @@ fn smoke_events(seconds: f64) -> (Flight, Vec<SensorEvent>) {
 }
 
 fn inline_run(flight: &Flight, events: &[SensorEvent]) -> Vec<PoseOutput> {
-    let mut r = VehicleRunner::new(flight.vehicle_config(), RunnerParams::default(), Some(flight.origin()));
+    let mut r = VehicleRunner::new(
+        flight.vehicle_config(),
+        RunnerParams::default(),
+        Some(flight.origin()),
+    );
     let mut poses = Vec::new();
     for e in events {
         poses.extend(r.push_inline(e.clone()).expect("accepted"));
@@ -32,7 +36,11 @@ fn inline_run(flight: &Flight, events: &[SensorEvent]) -> Vec<PoseOutput> {
 
 /// Jobs come back after a random number of later events (0..40), like a busy worker pool.
 fn pooled_run(flight: &Flight, events: &[SensorEvent], seed: u64) -> Vec<PoseOutput> {
-    let mut r = VehicleRunner::new(flight.vehicle_config(), RunnerParams::default(), Some(flight.origin()));
+    let mut r = VehicleRunner::new(
+        flight.vehicle_config(),
+        RunnerParams::default(),
+        Some(flight.origin()),
+    );
     let mut rng = Rng::new(seed);
     let mut poses = Vec::new();
     let mut out: VecDeque<(usize, VisionJob)> = VecDeque::new();
@@ -98,7 +106,10 @@ fn frame_without_camera_config_is_refused_and_harmless() {
 #[test]
 fn a_job_that_never_returns_is_abandoned_and_the_stream_flows_again() {
     let (flight, events) = smoke_events(6.0);
-    let params = RunnerParams { max_held_events: 100, ..RunnerParams::default() };
+    let params = RunnerParams {
+        max_held_events: 100,
+        ..RunnerParams::default()
+    };
     let mut r = VehicleRunner::new(flight.vehicle_config(), params, Some(flight.origin()));
     let mut poses = 0usize;
     let mut lost_jobs = Vec::new();
@@ -110,5 +121,8 @@ fn a_job_that_never_returns_is_abandoned_and_the_stream_flows_again() {
     }
     assert!(r.vision_stats().abandoned > 0);
     assert!(r.held_events() <= 100, "held {}", r.held_events());
-    assert!(poses > 500, "poses {poses}: IMU must keep flowing without vision results");
+    assert!(
+        poses > 500,
+        "poses {poses}: IMU must keep flowing without vision results"
+    );
 }

@@ -30,7 +30,13 @@ struct Args {
 }
 
 fn parse_args() -> Result<Args, String> {
-    let mut a = Args { vehicles: vec![250, 500, 1000, 2000], camera: false, duration_s: 15.0, batch: 4, clients: 8 };
+    let mut a = Args {
+        vehicles: vec![250, 500, 1000, 2000],
+        camera: false,
+        duration_s: 15.0,
+        batch: 4,
+        clients: 8,
+    };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
         let mut val = || it.next().ok_or(format!("{arg} needs a value"));
@@ -72,7 +78,13 @@ fn script(events: &[SensorEvent], batch: usize, camera: bool) -> Vec<Item> {
         if let Some(last) = imu.last() {
             let t_ns = last.t_ns;
             let n = imu.len() as u64;
-            out.push(Item { t_ns, payload: P::Imu(pb::ImuBatch { samples: std::mem::take(imu) }), imu_samples: n });
+            out.push(Item {
+                t_ns,
+                payload: P::Imu(pb::ImuBatch {
+                    samples: std::mem::take(imu),
+                }),
+                imu_samples: n,
+            });
         }
     };
     for e in events {
@@ -85,11 +97,19 @@ fn script(events: &[SensorEvent], batch: usize, camera: bool) -> Vec<Item> {
             }
             SensorEvent::Gnss(f) => {
                 flush(&mut imu, &mut out);
-                out.push(Item { t_ns: f.t_ns, payload: P::Gnss(f.into()), imu_samples: 0 });
+                out.push(Item {
+                    t_ns: f.t_ns,
+                    payload: P::Gnss(f.into()),
+                    imu_samples: 0,
+                });
             }
             SensorEvent::Camera(c) if camera => {
                 flush(&mut imu, &mut out);
-                out.push(Item { t_ns: c.t_ns, payload: P::Camera(c.into()), imu_samples: 0 });
+                out.push(Item {
+                    t_ns: c.t_ns,
+                    payload: P::Camera(c.into()),
+                    imu_samples: 0,
+                });
             }
             SensorEvent::Camera(_) => {}
         }
@@ -118,15 +138,25 @@ struct Row {
 
 impl Row {
     fn sustained(&self) -> bool {
-        self.poses as f64 >= 0.99 * self.imu_sent as f64 && self.lag_p99_ms < 50.0 && self.lat_p99_ms <= 50.0
+        self.poses as f64 >= 0.99 * self.imu_sent as f64
+            && self.lag_p99_ms < 50.0
+            && self.lat_p99_ms <= 50.0
     }
 }
 
 fn rss_mib() -> f64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
-        .and_then(|s| s.lines().find(|l| l.starts_with("VmRSS:")).map(str::to_owned))
-        .and_then(|l| l.split_whitespace().nth(1).and_then(|v| v.parse::<f64>().ok()))
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmRSS:"))
+                .map(str::to_owned)
+        })
+        .and_then(|l| {
+            l.split_whitespace()
+                .nth(1)
+                .and_then(|v| v.parse::<f64>().ok())
+        })
         .map_or(0.0, |kib| kib / 1024.0)
 }
 
@@ -140,14 +170,19 @@ async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleCo
     let url = format!("http://{}", server.grpc_addr);
     let mut c = UavNavClient::connect(url.clone()).await.expect("connect");
     for v in 0..n {
-        c.configure_vehicle(pb::ConfigureVehicleRequest { vehicle_id: format!("v{v}"), config: Some(config.clone()) })
-            .await
-            .expect("configure");
+        c.configure_vehicle(pb::ConfigureVehicleRequest {
+            vehicle_id: format!("v{v}"),
+            config: Some(config.clone()),
+        })
+        .await
+        .expect("configure");
     }
     // Latency and pose count, in-process on the output hub.
     let mut poses_rx = server.registry().ctx().hub.poses.subscribe();
     let poses = Arc::new(AtomicU64::new(0));
-    let hist = Arc::new(std::sync::Mutex::new(Histogram::<u64>::new_with_bounds(1, 60_000_000, 3).expect("hist")));
+    let hist = Arc::new(std::sync::Mutex::new(
+        Histogram::<u64>::new_with_bounds(1, 60_000_000, 3).expect("hist"),
+    ));
     let (p2, h2) = (Arc::clone(&poses), Arc::clone(&hist));
     let watcher = tokio::spawn(async move {
         loop {
@@ -170,19 +205,40 @@ async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleCo
     let t_first = items[0].t_ns;
     let horizon_ns = (args.duration_s * 1e9) as i64;
     let start = tokio::time::Instant::now() + Duration::from_millis(300);
-    let (imu_sent, frames_sent, not_accepted, envelopes) =
-        (Arc::new(AtomicU64::new(0)), Arc::new(AtomicU64::new(0)), Arc::new(AtomicU64::new(0)), Arc::new(AtomicU64::new(0)));
-    let lag = Arc::new(std::sync::Mutex::new(Histogram::<u64>::new_with_bounds(1, 60_000_000, 3).expect("hist")));
+    let (imu_sent, frames_sent, not_accepted, envelopes) = (
+        Arc::new(AtomicU64::new(0)),
+        Arc::new(AtomicU64::new(0)),
+        Arc::new(AtomicU64::new(0)),
+        Arc::new(AtomicU64::new(0)),
+    );
+    let lag = Arc::new(std::sync::Mutex::new(
+        Histogram::<u64>::new_with_bounds(1, 60_000_000, 3).expect("hist"),
+    ));
     let mut tasks = Vec::new();
     for k in 0..args.clients.min(n) {
-        let ids: Vec<String> = (k..n).step_by(args.clients).map(|v| format!("v{v}")).collect();
+        let ids: Vec<String> = (k..n)
+            .step_by(args.clients)
+            .map(|v| format!("v{v}"))
+            .collect();
         let (items, url) = (Arc::clone(&items), url.clone());
-        let (imu_sent, frames_sent, not_accepted, envelopes, lag) =
-            (imu_sent.clone(), frames_sent.clone(), not_accepted.clone(), envelopes.clone(), lag.clone());
+        let (imu_sent, frames_sent, not_accepted, envelopes, lag) = (
+            imu_sent.clone(),
+            frames_sent.clone(),
+            not_accepted.clone(),
+            envelopes.clone(),
+            lag.clone(),
+        );
         tasks.push(tokio::spawn(async move {
-            let mut client = UavNavClient::connect(url).await.expect("connect").max_encoding_message_size(16 << 20);
+            let mut client = UavNavClient::connect(url)
+                .await
+                .expect("connect")
+                .max_encoding_message_size(16 << 20);
             let (tx, rx) = mpsc::channel::<pb::SensorEnvelope>(4096);
-            let mut acks = client.ingest(tokio_stream::wrappers::ReceiverStream::new(rx)).await.expect("ingest").into_inner();
+            let mut acks = client
+                .ingest(tokio_stream::wrappers::ReceiverStream::new(rx))
+                .await
+                .expect("ingest")
+                .into_inner();
             let na = not_accepted.clone();
             let ack_task = tokio::spawn(async move {
                 while let Ok(Some(a)) = acks.message().await {
@@ -195,13 +251,19 @@ async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleCo
             for item in items.iter().take_while(|i| i.t_ns - t_first <= horizon_ns) {
                 let due = start + Duration::from_nanos((item.t_ns - t_first) as u64);
                 tokio::time::sleep_until(due).await;
-                let late_us = tokio::time::Instant::now().saturating_duration_since(due).as_micros() as u64;
+                let late_us = tokio::time::Instant::now()
+                    .saturating_duration_since(due)
+                    .as_micros() as u64;
                 if let Ok(mut h) = lag.lock() {
                     let _ = h.record(late_us.max(1));
                 }
                 for id in &ids {
                     seq += 1;
-                    let env = pb::SensorEnvelope { vehicle_id: id.clone(), sequence: seq, payload: Some(item.payload.clone()) };
+                    let env = pb::SensorEnvelope {
+                        vehicle_id: id.clone(),
+                        sequence: seq,
+                        payload: Some(item.payload.clone()),
+                    };
                     if tx.send(env).await.is_err() {
                         return;
                     }
@@ -222,7 +284,12 @@ async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleCo
     let seconds = start.elapsed().as_secs_f64();
     // The last reorder window is flushed after the idle delay.
     tokio::time::sleep(Duration::from_millis(500)).await;
-    let shed = server.registry().list("").iter().map(|h| h.shared.stats.shed.load(Ordering::Relaxed)).sum();
+    let shed = server
+        .registry()
+        .list("")
+        .iter()
+        .map(|h| h.shared.stats.shed.load(Ordering::Relaxed))
+        .sum();
     let rss_end = rss_mib();
     server.shutdown().await.expect("shutdown");
     watcher.abort();
@@ -258,7 +325,14 @@ fn main() {
     let text = std::fs::read_to_string(scenario_path).expect("scenarios/smoke.toml");
     let scenario = uavnav_sim::scenario::Scenario::from_toml_str(&text).expect("scenario");
     let flight = uavnav_sim::flight::Flight::new(&scenario).expect("flight");
-    eprintln!("simulating the smoke flight{}…", if args.camera { " with camera frames" } else { "" });
+    eprintln!(
+        "simulating the smoke flight{}…",
+        if args.camera {
+            " with camera frames"
+        } else {
+            ""
+        }
+    );
     let events: Vec<SensorEvent> = if args.camera {
         flight.events().collect::<Result<_, _>>().expect("events")
     } else {
@@ -273,7 +347,10 @@ fn main() {
     }
     let config = pb::VehicleConfig::from(&vc);
     let items = Arc::new(script(&events, args.batch, args.camera));
-    let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build().expect("runtime");
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .expect("runtime");
     println!(
         "| vehicles | camera | s | envelopes/s | IMU sent | poses | frames sent | refused | shed | send lag p99 ms | latency p50 / p99 / max ms | RSS start → end MiB | sustained |"
     );

@@ -165,7 +165,11 @@ impl VehicleHandle {
             queued.fetch_sub(1, std::sync::atomic::Ordering::AcqRel);
             return Err(SendError::Full);
         }
-        let r = self.tx.send(Msg::Data(vec![s])).await.map_err(|_| SendError::Closed);
+        let r = self
+            .tx
+            .send(Msg::Data(vec![s]))
+            .await
+            .map_err(|_| SendError::Closed);
         if r.is_err() {
             queued.fetch_sub(1, std::sync::atomic::Ordering::AcqRel);
         }
@@ -221,7 +225,9 @@ struct Actor {
     window: HealthWindow,
 }
 
-async fn recv_vision(pending: &mut Option<oneshot::Receiver<VisionResult>>) -> Option<VisionResult> {
+async fn recv_vision(
+    pending: &mut Option<oneshot::Receiver<VisionResult>>,
+) -> Option<VisionResult> {
     match pending {
         Some(rx) => rx.await.ok(),
         None => std::future::pending().await,
@@ -235,10 +241,11 @@ impl Actor {
         tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
         let idle = Duration::from_secs_f64(self.ctx.vehicles.idle_evict_s);
         // An idle stream's last window is flushed after this much wall time without input.
-        let flush_after = Duration::from_secs_f64((self.ctx.vehicles.reorder_window_ms * 1e-3).max(0.005));
+        let flush_after =
+            Duration::from_secs_f64((self.ctx.vehicles.reorder_window_ms * 1e-3).max(0.005));
         let evicted = loop {
-            let flush_at =
-                (!self.buffer.is_empty()).then(|| tokio::time::Instant::from_std(self.last_input + flush_after));
+            let flush_at = (!self.buffer.is_empty())
+                .then(|| tokio::time::Instant::from_std(self.last_input + flush_after));
             tokio::select! {
                 biased;
                 done = recv_vision(&mut self.pending), if self.pending.is_some() => self.on_vision(done),
@@ -312,7 +319,9 @@ impl Actor {
     fn on_input(&mut self, s: Stamped) {
         self.last_input = Instant::now();
         if matches!(s.input, Input::Camera(_)) {
-            self.shared.frames_queued.fetch_sub(1, std::sync::atomic::Ordering::AcqRel);
+            self.shared
+                .frames_queued
+                .fetch_sub(1, std::sync::atomic::Ordering::AcqRel);
         }
         let (t, kind) = (s.input.t_ns(), s.input.kind());
         match self.buffer.push(t, kind as u8, s) {
@@ -378,7 +387,10 @@ impl Actor {
         if self.ctx.pool.submit(Box::new(move || {
             let _ = tx.send(work());
         })) {
-            self.ctx.metrics.vision_in_flight.set(self.ctx.pool.stats().in_flight as i64);
+            self.ctx
+                .metrics
+                .vision_in_flight
+                .set(self.ctx.pool.stats().in_flight as i64);
             self.pending = Some(rx);
         }
     }
@@ -408,7 +420,9 @@ impl Actor {
                 pose.ingest_wall_ns = wall_ns;
             }
             let pose = Arc::new(pose);
-            self.shared.latest_pose.send_replace(Some(Arc::clone(&pose)));
+            self.shared
+                .latest_pose
+                .send_replace(Some(Arc::clone(&pose)));
             let _ = self.ctx.hub.poses.send(pose);
             self.ctx.metrics.poses.inc();
             if let Some((at, _)) = arrival {
@@ -434,8 +448,14 @@ impl Actor {
 
     fn publish_health(&mut self) {
         let engine = self.engine.health();
-        let report = Arc::new(self.window.report(&self.shared, &engine, self.buffer.len(), Instant::now()));
-        self.shared.latest_health.send_replace(Some(Arc::clone(&report)));
+        let report =
+            Arc::new(
+                self.window
+                    .report(&self.shared, &engine, self.buffer.len(), Instant::now()),
+            );
+        self.shared
+            .latest_health
+            .send_replace(Some(Arc::clone(&report)));
         let _ = self.ctx.hub.health.send(report);
         self.ctx.metrics.health_reports.inc();
     }

@@ -78,7 +78,9 @@ impl std::str::FromStr for ZenohMode {
             "peer" => Ok(ZenohMode::Peer),
             "client" => Ok(ZenohMode::Client),
             "router" => Ok(ZenohMode::Router),
-            other => Err(format!("unknown zenoh mode '{other}' (expected peer, client or router)")),
+            other => Err(format!(
+                "unknown zenoh mode '{other}' (expected peer, client or router)"
+            )),
         }
     }
 }
@@ -117,7 +119,11 @@ pub struct GrpcConfig {
 
 impl Default for GrpcConfig {
     fn default() -> Self {
-        Self { addr: SocketAddr::from(([0, 0, 0, 0], 50051)), max_message_bytes: 16 << 20, ack_buffer: 256 }
+        Self {
+            addr: SocketAddr::from(([0, 0, 0, 0], 50051)),
+            max_message_bytes: 16 << 20,
+            ack_buffer: 256,
+        }
     }
 }
 
@@ -131,7 +137,9 @@ pub struct HttpConfig {
 
 impl Default for HttpConfig {
     fn default() -> Self {
-        Self { addr: SocketAddr::from(([0, 0, 0, 0], 9464)) }
+        Self {
+            addr: SocketAddr::from(([0, 0, 0, 0], 9464)),
+        }
     }
 }
 
@@ -216,7 +224,12 @@ pub struct VisionConfig {
 
 impl Default for VisionConfig {
     fn default() -> Self {
-        Self { workers: 0, queue: 16, max_image_bytes: 12 << 20, max_image_side_px: 8192 }
+        Self {
+            workers: 0,
+            queue: 16,
+            max_image_bytes: 12 << 20,
+            max_image_side_px: 8192,
+        }
     }
 }
 
@@ -226,7 +239,9 @@ impl VisionConfig {
         if self.workers > 0 {
             self.workers
         } else {
-            std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+            std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(1)
         }
     }
 }
@@ -257,13 +272,20 @@ pub struct LogConfig {
 
 impl Default for LogConfig {
     fn default() -> Self {
-        Self { json: false, filter: "info".to_string() }
+        Self {
+            json: false,
+            filter: "info".to_string(),
+        }
     }
 }
 
 /// Command-line flags. Every flag overrides the file and the environment.
 #[derive(Debug, Clone, Default, Parser)]
-#[command(name = "uavnavd", version, about = "uavnav fleet estimation service (gRPC + Zenoh)")]
+#[command(
+    name = "uavnavd",
+    version,
+    about = "uavnav fleet estimation service (gRPC + Zenoh)"
+)]
 pub struct Cli {
     /// TOML config file (also `UAVNAV_CONFIG`).
     #[arg(long, value_name = "FILE")]
@@ -312,13 +334,18 @@ pub const ENV_VARS: &[(&str, &str)] = &[
 impl Config {
     /// Parses a TOML document (unknown keys are errors naming the key).
     pub fn from_toml(text: &str, path: &Path) -> Result<Self, ConfigError> {
-        toml::from_str(text).map_err(|e| ConfigError::Parse { path: path.to_path_buf(), message: e.to_string() })
+        toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })
     }
 
     /// Reads and parses a TOML file.
     pub fn from_file(path: &Path) -> Result<Self, ConfigError> {
-        let text =
-            std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.to_path_buf(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
         Self::from_toml(&text, path)
     }
 
@@ -332,7 +359,10 @@ impl Config {
         T: Into<OsString> + Clone,
     {
         let cli = Cli::try_parse_from(args)?;
-        let file = cli.config.clone().or_else(|| env("UAVNAV_CONFIG").map(PathBuf::from));
+        let file = cli
+            .config
+            .clone()
+            .or_else(|| env("UAVNAV_CONFIG").map(PathBuf::from));
         let mut cfg = match file {
             Some(path) => Self::from_file(&path)?,
             None => Self::default(),
@@ -349,9 +379,18 @@ impl Config {
         where
             T::Err: std::fmt::Display,
         {
-            value.parse::<T>().map_err(|e| ConfigError::Env { name: name.into(), value, message: e.to_string() })
+            value.parse::<T>().map_err(|e| ConfigError::Env {
+                name: name.into(),
+                value,
+                message: e.to_string(),
+            })
         }
-        let list = |v: String| v.split(',').map(|s| s.trim().to_string()).filter(|s| !s.is_empty()).collect();
+        let list = |v: String| {
+            v.split(',')
+                .map(|s| s.trim().to_string())
+                .filter(|s| !s.is_empty())
+                .collect()
+        };
         if let Some(v) = env("UAVNAV_GRPC_ADDR") {
             self.grpc.addr = parse("UAVNAV_GRPC_ADDR", v)?;
         }
@@ -419,15 +458,22 @@ impl Config {
         if self.grpc.max_message_bytes < 8 << 20 {
             return bad("grpc.max_message_bytes must be at least 8 MiB (1080p JPEG frames)");
         }
-        if self.grpc.ack_buffer == 0 || self.vehicles.input_queue == 0 || self.vehicles.camera_queue == 0 {
-            return bad("grpc.ack_buffer, vehicles.input_queue and vehicles.camera_queue must be > 0");
+        if self.grpc.ack_buffer == 0
+            || self.vehicles.input_queue == 0
+            || self.vehicles.camera_queue == 0
+        {
+            return bad(
+                "grpc.ack_buffer, vehicles.input_queue and vehicles.camera_queue must be > 0",
+            );
         }
         let v = &self.vehicles;
         if !(v.reorder_window_ms >= 0.0 && v.reorder_window_ms <= 10_000.0) {
             return bad("vehicles.reorder_window_ms must be in [0, 10000]");
         }
         if !(v.idle_evict_s > 0.0 && v.max_future_s > 0.0) || v.max_vehicles == 0 {
-            return bad("vehicles.idle_evict_s, vehicles.max_future_s and vehicles.max_vehicles must be > 0");
+            return bad(
+                "vehicles.idle_evict_s, vehicles.max_future_s and vehicles.max_vehicles must be > 0",
+            );
         }
         if self.health.period_ms == 0 {
             return bad("health.period_ms must be > 0");
@@ -449,7 +495,8 @@ mod tests {
 
     #[test]
     fn unknown_key_is_named() {
-        let err = Config::from_toml("[grpc]\nadress = \"1.2.3.4:5\"\n", Path::new("x.toml")).unwrap_err();
+        let err =
+            Config::from_toml("[grpc]\nadress = \"1.2.3.4:5\"\n", Path::new("x.toml")).unwrap_err();
         assert!(err.to_string().contains("adress"), "{err}");
     }
 }

@@ -52,7 +52,10 @@ pub struct EngineStep {
 
 impl std::fmt::Debug for EngineStep {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("EngineStep").field("poses", &self.poses.len()).field("work", &self.work.is_some()).finish()
+        f.debug_struct("EngineStep")
+            .field("poses", &self.poses.len())
+            .field("work", &self.work.is_some())
+            .finish()
     }
 }
 

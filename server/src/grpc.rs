@@ -34,7 +34,10 @@ pub struct UavNavService {
 impl UavNavService {
     /// A service over `ingestor`.
     pub fn new(ingestor: Ingestor, ack_buffer: usize) -> Self {
-        Self { ingestor, ack_buffer }
+        Self {
+            ingestor,
+            ack_buffer,
+        }
     }
 
     fn stopping(&self) -> watch::Receiver<bool> {
@@ -60,17 +63,29 @@ pub fn remap_decode_status(s: Status) -> Status {
 /// Rewrites a trailers-only error response from tonic's request decoding (INTERNAL for malformed
 /// protobuf, OUT_OF_RANGE for oversize) into INVALID_ARGUMENT / RESOURCE_EXHAUSTED. Used as an axum
 /// `map_response` layer around the whole gRPC router.
-pub async fn remap_transport_status<B>(mut resp: tonic::codegen::http::Response<B>) -> tonic::codegen::http::Response<B> {
+pub async fn remap_transport_status<B>(
+    mut resp: tonic::codegen::http::Response<B>,
+) -> tonic::codegen::http::Response<B> {
     let headers = resp.headers_mut();
-    let code = headers.get("grpc-status").and_then(|v| v.to_str().ok()).map(str::to_owned);
-    let msg = headers.get("grpc-message").and_then(|v| v.to_str().ok()).unwrap_or("").to_ascii_lowercase();
+    let code = headers
+        .get("grpc-status")
+        .and_then(|v| v.to_str().ok())
+        .map(str::to_owned);
+    let msg = headers
+        .get("grpc-message")
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("")
+        .to_ascii_lowercase();
     let new = match code.as_deref() {
         Some("13") if msg.contains("decode") => Some("3"),
         Some("11") if msg.contains("too%20large") || msg.contains("too large") => Some("8"),
         _ => None,
     };
     if let Some(new) = new {
-        headers.insert("grpc-status", tonic::codegen::http::HeaderValue::from_static(new));
+        headers.insert(
+            "grpc-status",
+            tonic::codegen::http::HeaderValue::from_static(new),
+        );
     }
     resp
 }
@@ -89,14 +104,24 @@ async fn ack_envelope(ingestor: &Ingestor, e: pb::SensorEnvelope) -> pb::IngestA
     let verdict = match envelope_kind(&e) {
         Some(p) => ingestor.submit(Transport::Grpc, &e.vehicle_id, p).await,
         None => {
-            ingestor.registry().ctx().metrics.input(Transport::Grpc, Kind::Malformed, Outcome::Invalid, 1);
+            ingestor.registry().ctx().metrics.input(
+                Transport::Grpc,
+                Kind::Malformed,
+                Outcome::Invalid,
+                1,
+            );
             crate::ingest::Verdict {
                 status: pb::IngestStatus::InvalidArgument,
                 reason: "payload: required (imu, gnss, camera or config)".into(),
             }
         }
     };
-    pb::IngestAck { sequence: e.sequence, vehicle_id: e.vehicle_id, status: verdict.status as i32, reason: verdict.reason }
+    pb::IngestAck {
+        sequence: e.sequence,
+        vehicle_id: e.vehicle_id,
+        status: verdict.status as i32,
+        reason: verdict.reason,
+    }
 }
 
 /// Which vehicles a watch selects.
@@ -111,16 +136,26 @@ struct Selector {
 impl Selector {
     fn from_request(r: &pb::WatchRequest) -> Result<Self, Status> {
         if r.vehicle_ids.is_empty() && r.id_prefix.is_empty() && !r.all {
-            return Err(Status::invalid_argument("vehicle_ids, id_prefix or all: select at least one vehicle"));
+            return Err(Status::invalid_argument(
+                "vehicle_ids, id_prefix or all: select at least one vehicle",
+            ));
         }
         for id in &r.vehicle_ids {
-            validate::vehicle_id(id).map_err(|e| Status::invalid_argument(format!("vehicle_ids: {}", e.reason)))?;
+            validate::vehicle_id(id)
+                .map_err(|e| Status::invalid_argument(format!("vehicle_ids: {}", e.reason)))?;
         }
-        Ok(Self { ids: r.vehicle_ids.clone(), prefix: r.id_prefix.clone(), all: r.all, decimation: r.decimation.max(1) })
+        Ok(Self {
+            ids: r.vehicle_ids.clone(),
+            prefix: r.id_prefix.clone(),
+            all: r.all,
+            decimation: r.decimation.max(1),
+        })
     }
 
     fn matches(&self, id: &str) -> bool {
-        self.all || (!self.prefix.is_empty() && id.starts_with(&self.prefix)) || self.ids.iter().any(|v| v == id)
+        self.all
+            || (!self.prefix.is_empty() && id.starts_with(&self.prefix))
+            || self.ids.iter().any(|v| v == id)
     }
 }
 
@@ -179,7 +214,10 @@ impl UavNav for UavNavService {
     type WatchPosesStream = BoxStream<pb::PoseEstimate>;
     type WatchHealthStream = BoxStream<pb::VehicleHealth>;
 
-    async fn ingest(&self, request: Request<Streaming<pb::SensorEnvelope>>) -> Result<Response<Self::IngestStream>, Status> {
+    async fn ingest(
+        &self,
+        request: Request<Streaming<pb::SensorEnvelope>>,
+    ) -> Result<Response<Self::IngestStream>, Status> {
         let mut inbound = request.into_inner();
         // Bounded: when the client stops reading acks we stop reading envelopes (HTTP/2 flow
         // control then pushes back on the sender).
@@ -198,7 +236,12 @@ impl UavNav for UavNavService {
                     Some(Err(status)) => {
                         let status = remap_decode_status(status);
                         if status.code() == tonic::Code::InvalidArgument {
-                            ingestor.registry().ctx().metrics.input(Transport::Grpc, Kind::Malformed, Outcome::Invalid, 1);
+                            ingestor.registry().ctx().metrics.input(
+                                Transport::Grpc,
+                                Kind::Malformed,
+                                Outcome::Invalid,
+                                1,
+                            );
                         }
                         let _ = tx.send(Err(status)).await;
                         break;
@@ -215,28 +258,63 @@ impl UavNav for UavNavService {
         Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
     }
 
-    async fn watch_poses(&self, request: Request<pb::WatchRequest>) -> Result<Response<Self::WatchPosesStream>, Status> {
+    async fn watch_poses(
+        &self,
+        request: Request<pb::WatchRequest>,
+    ) -> Result<Response<Self::WatchPosesStream>, Status> {
         let sel = Selector::from_request(request.get_ref())?;
         let rx = self.ingestor.registry().ctx().hub.poses.subscribe();
-        Ok(Response::new(watch_stream(rx, sel, self.stopping(), |p: &pb::PoseEstimate| &p.vehicle_id)))
+        Ok(Response::new(watch_stream(
+            rx,
+            sel,
+            self.stopping(),
+            |p: &pb::PoseEstimate| &p.vehicle_id,
+        )))
     }
 
-    async fn watch_health(&self, request: Request<pb::WatchRequest>) -> Result<Response<Self::WatchHealthStream>, Status> {
+    async fn watch_health(
+        &self,
+        request: Request<pb::WatchRequest>,
+    ) -> Result<Response<Self::WatchHealthStream>, Status> {
         let sel = Selector::from_request(request.get_ref())?;
         let rx = self.ingestor.registry().ctx().hub.health.subscribe();
-        Ok(Response::new(watch_stream(rx, sel, self.stopping(), |h: &pb::VehicleHealth| &h.vehicle_id)))
+        Ok(Response::new(watch_stream(
+            rx,
+            sel,
+            self.stopping(),
+            |h: &pb::VehicleHealth| &h.vehicle_id,
+        )))
     }
 
-    async fn get_pose(&self, request: Request<pb::GetPoseRequest>) -> Result<Response<pb::PoseEstimate>, Status> {
+    async fn get_pose(
+        &self,
+        request: Request<pb::GetPoseRequest>,
+    ) -> Result<Response<pb::PoseEstimate>, Status> {
         let id = &request.get_ref().vehicle_id;
         validate::vehicle_id(id).map_err(|e| e.to_status())?;
-        let h = self.ingestor.registry().get(id).ok_or_else(|| unknown_vehicle(id))?;
-        let pose = h.shared.pose().ok_or_else(|| Status::not_found(format!("vehicle_id: {id:?} has no pose yet")))?;
+        let h = self
+            .ingestor
+            .registry()
+            .get(id)
+            .ok_or_else(|| unknown_vehicle(id))?;
+        let pose = h
+            .shared
+            .pose()
+            .ok_or_else(|| Status::not_found(format!("vehicle_id: {id:?} has no pose yet")))?;
         Ok(Response::new((*pose).clone()))
     }
 
-    async fn list_vehicles(&self, request: Request<pb::ListVehiclesRequest>) -> Result<Response<pb::ListVehiclesResponse>, Status> {
-        let vehicles = self.ingestor.registry().list(&request.get_ref().id_prefix).iter().map(summary_of).collect();
+    async fn list_vehicles(
+        &self,
+        request: Request<pb::ListVehiclesRequest>,
+    ) -> Result<Response<pb::ListVehiclesResponse>, Status> {
+        let vehicles = self
+            .ingestor
+            .registry()
+            .list(&request.get_ref().id_prefix)
+            .iter()
+            .map(summary_of)
+            .collect();
         Ok(Response::new(pb::ListVehiclesResponse { vehicles }))
     }
 
@@ -246,12 +324,22 @@ impl UavNav for UavNavService {
     ) -> Result<Response<pb::ConfigureVehicleResponse>, Status> {
         let r = request.get_ref();
         validate::vehicle_id(&r.vehicle_id).map_err(|e| e.to_status())?;
-        let config = r.config.as_ref().ok_or_else(|| Status::invalid_argument("config: required"))?;
-        let created = self.ingestor.configure(&r.vehicle_id, config, true).await.map_err(|e| e.to_status())?;
+        let config = r
+            .config
+            .as_ref()
+            .ok_or_else(|| Status::invalid_argument("config: required"))?;
+        let created = self
+            .ingestor
+            .configure(&r.vehicle_id, config, true)
+            .await
+            .map_err(|e| e.to_status())?;
         Ok(Response::new(pb::ConfigureVehicleResponse { created }))
     }
 
-    async fn reset_vehicle(&self, request: Request<pb::ResetVehicleRequest>) -> Result<Response<pb::ResetVehicleResponse>, Status> {
+    async fn reset_vehicle(
+        &self,
+        request: Request<pb::ResetVehicleRequest>,
+    ) -> Result<Response<pb::ResetVehicleResponse>, Status> {
         let id = &request.get_ref().vehicle_id;
         match self.ingestor.reset(id).await.map_err(|e| e.to_status())? {
             Some(()) => Ok(Response::new(pb::ResetVehicleResponse {})),
@@ -264,12 +352,18 @@ impl UavNav for UavNavService {
 pub fn summary_of(h: &crate::actor::VehicleHandle) -> pb::VehicleSummary {
     let s = &h.shared;
     let pose = s.pose();
-    let mode = s.health().map(|x| x.mode).or_else(|| pose.as_ref().map(|p| p.mode)).unwrap_or(pb::EstimatorMode::Initialising as i32);
+    let mode = s
+        .health()
+        .map(|x| x.mode)
+        .or_else(|| pose.as_ref().map(|p| p.mode))
+        .unwrap_or(pb::EstimatorMode::Initialising as i32);
     pb::VehicleSummary {
         vehicle_id: s.id.to_string(),
         mode,
         last_t_ns: pose.map(|p| p.t_ns).unwrap_or(0),
-        last_input_wall_ns: s.last_input_wall_ns.load(std::sync::atomic::Ordering::Relaxed),
+        last_input_wall_ns: s
+            .last_input_wall_ns
+            .load(std::sync::atomic::Ordering::Relaxed),
         configured: s.configured.load(std::sync::atomic::Ordering::Relaxed),
     }
 }

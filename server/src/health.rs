@@ -25,7 +25,13 @@ pub struct HealthWindow {
 impl HealthWindow {
     /// A window starting now.
     pub fn new(now: Instant) -> Self {
-        Self { since: now, counts_at_start: [0; 3], latencies_s: Vec::new(), latency_seen: 0, last_vision: None }
+        Self {
+            since: now,
+            counts_at_start: [0; 3],
+            latencies_s: Vec::new(),
+            latency_seen: 0,
+            last_vision: None,
+        }
     }
 
     /// Records one ingest-to-pose latency.
@@ -49,10 +55,18 @@ impl HealthWindow {
         now: Instant,
     ) -> pb::VehicleHealth {
         let st = &shared.stats;
-        let counts = [VehicleStats::get(&st.imu), VehicleStats::get(&st.gnss), VehicleStats::get(&st.camera)];
+        let counts = [
+            VehicleStats::get(&st.imu),
+            VehicleStats::get(&st.gnss),
+            VehicleStats::get(&st.camera),
+        ];
         let dt_s = now.duration_since(self.since).as_secs_f64().max(1e-6);
         let rate = |i: usize| counts[i].saturating_sub(self.counts_at_start[i]) as f64 / dt_s;
-        let input_rates = pb::SensorRates { imu_hz: rate(0), gnss_hz: rate(1), camera_hz: rate(2) };
+        let input_rates = pb::SensorRates {
+            imu_hz: rate(0),
+            gnss_hz: rate(1),
+            camera_hz: rate(2),
+        };
         if engine.vision.is_some() {
             self.last_vision = engine.vision;
         }
@@ -73,7 +87,11 @@ impl HealthWindow {
                 gnss_gate_rejections: engine.gnss_gate_rejections,
                 vision_gate_rejections: engine.vision_gate_rejections,
             }),
-            vision: if shared.camera().is_some() { self.last_vision } else { None },
+            vision: if shared.camera().is_some() {
+                self.last_vision
+            } else {
+                None
+            },
             reorder_depth: reorder_depth.min(u32::MAX as usize) as u32,
         };
         self.since = now;
@@ -90,7 +108,11 @@ fn latency_stats(samples: &mut [f64]) -> pb::LatencyStats {
     }
     samples.sort_by(f64::total_cmp);
     let at = |q: f64| samples[((samples.len() - 1) as f64 * q).round() as usize];
-    pb::LatencyStats { p50_s: at(0.5), p99_s: at(0.99), max_s: samples[samples.len() - 1] }
+    pb::LatencyStats {
+        p50_s: at(0.5),
+        p99_s: at(0.99),
+        max_s: samples[samples.len() - 1],
+    }
 }
 
 #[cfg(test)]
@@ -113,7 +135,12 @@ mod tests {
         let mut w = HealthWindow::new(t0);
         VehicleStats::add(&shared.stats.imu, 200);
         VehicleStats::add(&shared.stats.gnss, 5);
-        let r = w.report(&shared, &EngineHealth::default(), 0, t0 + std::time::Duration::from_secs(1));
+        let r = w.report(
+            &shared,
+            &EngineHealth::default(),
+            0,
+            t0 + std::time::Duration::from_secs(1),
+        );
         let rates = r.input_rates.unwrap();
         assert!((rates.imu_hz - 200.0).abs() < 1e-9 && (rates.gnss_hz - 5.0).abs() < 1e-9);
         assert_eq!(r.counters.unwrap().accepted, 205);

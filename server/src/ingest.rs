@@ -48,13 +48,19 @@ pub struct Verdict {
 
 impl Verdict {
     fn accepted(reason: String) -> Self {
-        Self { status: pb::IngestStatus::Accepted, reason }
+        Self {
+            status: pb::IngestStatus::Accepted,
+            reason,
+        }
     }
 }
 
 impl From<Rejection> for Verdict {
     fn from(r: Rejection) -> Self {
-        Self { status: r.status, reason: r.reason }
+        Self {
+            status: r.status,
+            reason: r.reason,
+        }
     }
 }
 
@@ -69,7 +75,11 @@ pub struct Ingestor {
 impl Ingestor {
     /// An ingestor over `registry`.
     pub fn new(registry: Arc<Registry>, limits: ImageLimits, max_message_bytes: usize) -> Self {
-        Self { registry, limits, max_message_bytes }
+        Self {
+            registry,
+            limits,
+            max_message_bytes,
+        }
     }
 
     /// Largest accepted encoded message, bytes.
@@ -115,31 +125,58 @@ impl Ingestor {
         verdict
     }
 
-    async fn route(&self, transport: Transport, id: &str, payload: Payload<'_>) -> Result<Verdict, Rejection> {
+    async fn route(
+        &self,
+        transport: Transport,
+        id: &str,
+        payload: Payload<'_>,
+    ) -> Result<Verdict, Rejection> {
         validate::vehicle_id(id)?;
         match payload {
             Payload::Imu(b) => self.imu(transport, id, b).await,
             Payload::Gnss(g) => self.gnss(transport, id, g).await,
             Payload::Camera(c) => self.camera(transport, id, c).await,
-            Payload::Config(c) => self.configure(id, c, false).await.map(|_| Verdict::accepted(String::new())),
+            Payload::Config(c) => self
+                .configure(id, c, false)
+                .await
+                .map(|_| Verdict::accepted(String::new())),
         }
     }
 
     fn vehicle(&self, id: &str) -> Result<VehicleHandle, Rejection> {
-        self.registry.get_or_create(id, None).map(|(h, _)| h).map_err(registry_rejection)
+        self.registry
+            .get_or_create(id, None)
+            .map(|(h, _)| h)
+            .map_err(registry_rejection)
     }
 
-    async fn imu(&self, transport: Transport, id: &str, b: &pb::ImuBatch) -> Result<Verdict, Rejection> {
+    async fn imu(
+        &self,
+        transport: Transport,
+        id: &str,
+        b: &pb::ImuBatch,
+    ) -> Result<Verdict, Rejection> {
         let samples = validate::imu_batch(b)?;
         let h = self.vehicle(id)?;
         let ctx = self.registry.ctx();
         let (at, wall) = (Instant::now(), wall_ns());
-        let (n, mut batch, mut late, mut future) = (samples.len(), Vec::with_capacity(samples.len()), 0, 0);
+        let (n, mut batch, mut late, mut future) =
+            (samples.len(), Vec::with_capacity(samples.len()), 0, 0);
         let mut first_refusal = None;
         for (i, s) in samples.into_iter().enumerate() {
             let field = || format!("imu.samples[{i}]");
-            match h.shared.admit(InputKind::Imu, s.t_ns, ctx.window_ns(), ctx.max_future_ns(), field) {
-                Ok(()) => batch.push(Stamped { input: Input::Imu(s), wall_ns: wall, at }),
+            match h.shared.admit(
+                InputKind::Imu,
+                s.t_ns,
+                ctx.window_ns(),
+                ctx.max_future_ns(),
+                field,
+            ) {
+                Ok(()) => batch.push(Stamped {
+                    input: Input::Imu(s),
+                    wall_ns: wall,
+                    at,
+                }),
                 Err(r) => {
                     match &r {
                         GateRefusal::Late(_) => late += 1,
@@ -156,35 +193,70 @@ impl Ingestor {
         }
         VehicleStats::add(&h.shared.stats.late, late + future);
         ctx.metrics.input(transport, Kind::Imu, Outcome::Late, late);
-        ctx.metrics.input(transport, Kind::Imu, Outcome::Future, future);
+        ctx.metrics
+            .input(transport, Kind::Imu, Outcome::Future, future);
         self.send(&h, id, Msg::Data(batch)).await?;
         VehicleStats::add(&h.shared.stats.imu, accepted);
-        ctx.metrics.input(transport, Kind::Imu, Outcome::Accepted, accepted);
-        h.shared.last_input_wall_ns.store(wall, std::sync::atomic::Ordering::Relaxed);
+        ctx.metrics
+            .input(transport, Kind::Imu, Outcome::Accepted, accepted);
+        h.shared
+            .last_input_wall_ns
+            .store(wall, std::sync::atomic::Ordering::Relaxed);
         let remark = match first_refusal {
-            Some(r) => format!("{} of {n} samples dropped: {}", n as u64 - accepted, refusal_text(&r)),
+            Some(r) => format!(
+                "{} of {n} samples dropped: {}",
+                n as u64 - accepted,
+                refusal_text(&r)
+            ),
             None => String::new(),
         };
         Ok(Verdict::accepted(remark))
     }
 
-    async fn gnss(&self, transport: Transport, id: &str, g: &pb::GnssFix) -> Result<Verdict, Rejection> {
+    async fn gnss(
+        &self,
+        transport: Transport,
+        id: &str,
+        g: &pb::GnssFix,
+    ) -> Result<Verdict, Rejection> {
         let fix = validate::gnss_fix(g)?;
         let h = self.vehicle(id)?;
         let ctx = self.registry.ctx();
         h.shared
-            .admit(InputKind::Gnss, fix.t_ns, ctx.window_ns(), ctx.max_future_ns(), || "gnss".into())
+            .admit(
+                InputKind::Gnss,
+                fix.t_ns,
+                ctx.window_ns(),
+                ctx.max_future_ns(),
+                || "gnss".into(),
+            )
             .map_err(|r| gate_rejection(Some(r)))?;
         let wall = wall_ns();
-        self.send(&h, id, Msg::Data(vec![Stamped { input: Input::Gnss(fix), wall_ns: wall, at: Instant::now() }]))
-            .await?;
+        self.send(
+            &h,
+            id,
+            Msg::Data(vec![Stamped {
+                input: Input::Gnss(fix),
+                wall_ns: wall,
+                at: Instant::now(),
+            }]),
+        )
+        .await?;
         VehicleStats::add(&h.shared.stats.gnss, 1);
-        ctx.metrics.input(transport, Kind::Gnss, Outcome::Accepted, 1);
-        h.shared.last_input_wall_ns.store(wall, std::sync::atomic::Ordering::Relaxed);
+        ctx.metrics
+            .input(transport, Kind::Gnss, Outcome::Accepted, 1);
+        h.shared
+            .last_input_wall_ns
+            .store(wall, std::sync::atomic::Ordering::Relaxed);
         Ok(Verdict::accepted(String::new()))
     }
 
-    async fn camera(&self, transport: Transport, id: &str, c: &pb::CameraFrame) -> Result<Verdict, Rejection> {
+    async fn camera(
+        &self,
+        transport: Transport,
+        id: &str,
+        c: &pb::CameraFrame,
+    ) -> Result<Verdict, Rejection> {
         // A frame never creates a vehicle: without a configuration there is no camera to check.
         let Some(h) = self.registry.get(id) else {
             return Err(Rejection::precondition(format!(
@@ -194,42 +266,84 @@ impl Ingestor {
         let frame = validate::camera_frame(c, h.shared.camera(), self.limits)?;
         let ctx = self.registry.ctx();
         h.shared
-            .admit(InputKind::Camera, frame.t_ns, ctx.window_ns(), ctx.max_future_ns(), || "camera".into())
+            .admit(
+                InputKind::Camera,
+                frame.t_ns,
+                ctx.window_ns(),
+                ctx.max_future_ns(),
+                || "camera".into(),
+            )
             .map_err(|r| gate_rejection(Some(r)))?;
         let wall = wall_ns();
-        let stamped = Stamped { input: Input::Camera(frame), wall_ns: wall, at: Instant::now() };
+        let stamped = Stamped {
+            input: Input::Camera(frame),
+            wall_ns: wall,
+            at: Instant::now(),
+        };
         match h.send_camera(stamped, ctx.vehicles.camera_queue).await {
             Ok(()) => {}
             Err(SendError::Full) => {
                 ctx.metrics.vision_shed.inc();
-                return Err(Rejection::exhausted("camera: the vehicle's camera queue is full; frame shed"));
+                return Err(Rejection::exhausted(
+                    "camera: the vehicle's camera queue is full; frame shed",
+                ));
             }
-            Err(SendError::Closed) => return Err(Rejection::exhausted("camera: the vehicle is restarting; frame shed")),
+            Err(SendError::Closed) => {
+                return Err(Rejection::exhausted(
+                    "camera: the vehicle is restarting; frame shed",
+                ));
+            }
         }
         VehicleStats::add(&h.shared.stats.camera, 1);
-        ctx.metrics.input(transport, Kind::Camera, Outcome::Accepted, 1);
-        h.shared.last_input_wall_ns.store(wall, std::sync::atomic::Ordering::Relaxed);
+        ctx.metrics
+            .input(transport, Kind::Camera, Outcome::Accepted, 1);
+        h.shared
+            .last_input_wall_ns
+            .store(wall, std::sync::atomic::Ordering::Relaxed);
         Ok(Verdict::accepted(String::new()))
     }
 
     /// Sends on the ordered queue, starting a fresh actor once if this one was evicted meanwhile.
     async fn send(&self, h: &VehicleHandle, id: &str, msg: Msg) -> Result<(), Rejection> {
-        let Err(msg) = h.send_or_return(msg).await else { return Ok(()) };
+        let Err(msg) = h.send_or_return(msg).await else {
+            return Ok(());
+        };
         let fresh = self.vehicle(id)?;
-        fresh.send(msg).await.map_err(|_| Rejection::exhausted(format!("vehicle {id:?} is restarting; resend")))
+        fresh
+            .send(msg)
+            .await
+            .map_err(|_| Rejection::exhausted(format!("vehicle {id:?} is restarting; resend")))
     }
 
     /// Creates or reconfigures a vehicle. `wait` waits until the actor applied it.
     /// Returns whether the vehicle was created.
-    pub async fn configure(&self, id: &str, c: &pb::VehicleConfig, wait: bool) -> Result<bool, Rejection> {
+    pub async fn configure(
+        &self,
+        id: &str,
+        c: &pb::VehicleConfig,
+        wait: bool,
+    ) -> Result<bool, Rejection> {
         validate::vehicle_id(id)?;
         let (config, spec) = validate::vehicle_config(c, self.limits.max_side_px)?;
-        let (h, created) = self.registry.get_or_create(id, Some(&config)).map_err(registry_rejection)?;
+        let (h, created) = self
+            .registry
+            .get_or_create(id, Some(&config))
+            .map_err(registry_rejection)?;
         h.shared.set_camera(spec);
-        h.shared.configured.store(true, std::sync::atomic::Ordering::Relaxed);
+        h.shared
+            .configured
+            .store(true, std::sync::atomic::Ordering::Relaxed);
         if !created {
             let (tx, rx) = tokio::sync::oneshot::channel();
-            self.send(&h, id, Msg::Configure { config: Box::new(config), reply: Some(tx) }).await?;
+            self.send(
+                &h,
+                id,
+                Msg::Configure {
+                    config: Box::new(config),
+                    reply: Some(tx),
+                },
+            )
+            .await?;
             if wait {
                 let _ = rx.await;
             }
@@ -240,8 +354,14 @@ impl Ingestor {
     /// Restarts a vehicle's estimator; `None` when the vehicle is unknown.
     pub async fn reset(&self, id: &str) -> Result<Option<()>, Rejection> {
         validate::vehicle_id(id)?;
-        let Some(h) = self.registry.get(id) else { return Ok(None) };
-        h.shared.gate.lock().unwrap_or_else(|p| p.into_inner()).clear();
+        let Some(h) = self.registry.get(id) else {
+            return Ok(None);
+        };
+        h.shared
+            .gate
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clear();
         let (tx, rx) = tokio::sync::oneshot::channel();
         self.send(&h, id, Msg::Reset { reply: Some(tx) }).await?;
         let _ = rx.await;
@@ -264,8 +384,14 @@ fn refusal_text(r: &GateRefusal) -> &str {
 
 fn gate_rejection(r: Option<GateRefusal>) -> Rejection {
     match r {
-        Some(GateRefusal::Late(reason)) => Rejection { status: pb::IngestStatus::Late, reason },
-        Some(GateRefusal::Future(reason)) => Rejection { status: pb::IngestStatus::OutOfRange, reason },
+        Some(GateRefusal::Late(reason)) => Rejection {
+            status: pb::IngestStatus::Late,
+            reason,
+        },
+        Some(GateRefusal::Future(reason)) => Rejection {
+            status: pb::IngestStatus::OutOfRange,
+            reason,
+        },
         None => Rejection::invalid("no sample accepted"),
     }
 }

@@ -56,7 +56,11 @@ pub fn run() -> ExitCode {
         Ok(c) => c,
         Err(config::ConfigError::Cli(e)) => {
             let _ = e.print();
-            return if e.use_stderr() { ExitCode::from(2) } else { ExitCode::SUCCESS };
+            return if e.use_stderr() {
+                ExitCode::from(2)
+            } else {
+                ExitCode::SUCCESS
+            };
         }
         Err(e) => {
             eprintln!("uavnavd: {e}");
@@ -64,7 +68,10 @@ pub fn run() -> ExitCode {
         }
     };
     logging::init(&config.log);
-    let runtime = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
+    let runtime = match tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+    {
         Ok(r) => r,
         Err(e) => {
             eprintln!("uavnavd: cannot start the async runtime: {e}");

@@ -140,19 +140,63 @@ impl Metrics {
         let reorder_dropped = Counter::default();
         let engine_errors = Counter::default();
         let zenoh_output_lagged = Counter::default();
-        registry.register("inputs", "Sensor inputs by transport, kind and outcome", inputs.clone());
+        registry.register(
+            "inputs",
+            "Sensor inputs by transport, kind and outcome",
+            inputs.clone(),
+        );
         registry.register("poses", "Pose estimates published", poses.clone());
-        registry.register("health_reports", "Vehicle health reports published", health_reports.clone());
+        registry.register(
+            "health_reports",
+            "Vehicle health reports published",
+            health_reports.clone(),
+        );
         registry.register("vehicles", "Vehicle actors alive", vehicles.clone());
-        registry.register("evictions", "Vehicle actors evicted after the idle time", evictions.clone());
-        registry.register("ingest_to_pose_latency_seconds", "Ingest-to-pose latency", latency.clone());
-        registry.register("vision_jobs_done", "Vision jobs completed", vision_done.clone());
-        registry.register("vision_jobs_failed", "Vision jobs failed", vision_failed.clone());
-        registry.register("vision_frames_shed", "Camera frames shed by the overload policy", vision_shed.clone());
-        registry.register("vision_in_flight", "Vision jobs queued or running", vision_in_flight.clone());
-        registry.register("reorder_dropped", "Inputs dropped as late or duplicate in reorder windows", reorder_dropped.clone());
-        registry.register("engine_errors", "Estimator errors on validated inputs", engine_errors.clone());
-        registry.register("zenoh_output_lagged", "Outputs skipped by a lagging Zenoh publisher", zenoh_output_lagged.clone());
+        registry.register(
+            "evictions",
+            "Vehicle actors evicted after the idle time",
+            evictions.clone(),
+        );
+        registry.register(
+            "ingest_to_pose_latency_seconds",
+            "Ingest-to-pose latency",
+            latency.clone(),
+        );
+        registry.register(
+            "vision_jobs_done",
+            "Vision jobs completed",
+            vision_done.clone(),
+        );
+        registry.register(
+            "vision_jobs_failed",
+            "Vision jobs failed",
+            vision_failed.clone(),
+        );
+        registry.register(
+            "vision_frames_shed",
+            "Camera frames shed by the overload policy",
+            vision_shed.clone(),
+        );
+        registry.register(
+            "vision_in_flight",
+            "Vision jobs queued or running",
+            vision_in_flight.clone(),
+        );
+        registry.register(
+            "reorder_dropped",
+            "Inputs dropped as late or duplicate in reorder windows",
+            reorder_dropped.clone(),
+        );
+        registry.register(
+            "engine_errors",
+            "Estimator errors on validated inputs",
+            engine_errors.clone(),
+        );
+        registry.register(
+            "zenoh_output_lagged",
+            "Outputs skipped by a lagging Zenoh publisher",
+            zenoh_output_lagged.clone(),
+        );
         Self {
             registry: Arc::new(registry),
             inputs,
@@ -173,7 +217,13 @@ impl Metrics {
 
     /// Counts `n` inputs.
     pub fn input(&self, transport: Transport, kind: Kind, outcome: Outcome, n: u64) {
-        self.inputs.get_or_create(&InputLabels { transport, kind, outcome }).inc_by(n);
+        self.inputs
+            .get_or_create(&InputLabels {
+                transport,
+                kind,
+                outcome,
+            })
+            .inc_by(n);
     }
 
     /// The text exposition of every metric.

@@ -32,7 +32,10 @@ pub struct Registry {
 impl Registry {
     /// An empty registry whose actors share `ctx`.
     pub fn new(ctx: Arc<Ctx>) -> Arc<Self> {
-        Arc::new(Self { ctx, map: RwLock::new(HashMap::new()) })
+        Arc::new(Self {
+            ctx,
+            map: RwLock::new(HashMap::new()),
+        })
     }
 
     /// The service context.
@@ -72,9 +75,16 @@ impl Registry {
         let shared = Arc::new(VehicleShared::new(Arc::clone(&key)));
         let cfg = config.cloned().unwrap_or_default();
         if config.is_some() {
-            shared.configured.store(true, std::sync::atomic::Ordering::Relaxed);
+            shared
+                .configured
+                .store(true, std::sync::atomic::Ordering::Relaxed);
         }
-        let handle = actor::spawn(Arc::clone(&shared), cfg, Arc::clone(&self.ctx), self.exit_hook(&shared));
+        let handle = actor::spawn(
+            Arc::clone(&shared),
+            cfg,
+            Arc::clone(&self.ctx),
+            self.exit_hook(&shared),
+        );
         map.insert(Arc::clone(&key), handle.clone());
         self.ctx.metrics.vehicles.set(map.len() as i64);
         let _ = self.ctx.hub.lifecycle.send((key, true));
@@ -88,7 +98,10 @@ impl Registry {
         Box::new(move |evicted| {
             let Some(reg) = weak.upgrade() else { return };
             let mut map = reg.map.write().unwrap_or_else(|p| p.into_inner());
-            if map.get(&shared.id).is_some_and(|h| Arc::ptr_eq(&h.shared, &shared)) {
+            if map
+                .get(&shared.id)
+                .is_some_and(|h| Arc::ptr_eq(&h.shared, &shared))
+            {
                 map.remove(&shared.id);
             }
             reg.ctx.metrics.vehicles.set(map.len() as i64);
@@ -102,8 +115,11 @@ impl Registry {
     /// Live vehicles sorted by id, optionally filtered by prefix.
     pub fn list(&self, prefix: &str) -> Vec<VehicleHandle> {
         let map = self.map.read().unwrap_or_else(|p| p.into_inner());
-        let mut v: Vec<VehicleHandle> =
-            map.values().filter(|h| !h.is_closed() && h.shared.id.starts_with(prefix)).cloned().collect();
+        let mut v: Vec<VehicleHandle> = map
+            .values()
+            .filter(|h| !h.is_closed() && h.shared.id.starts_with(prefix))
+            .cloned()
+            .collect();
         v.sort_by(|a, b| a.shared.id.cmp(&b.shared.id));
         v
     }

@@ -45,7 +45,12 @@ impl<T> ReorderBuffer<T> {
         if self.released_ns.is_some_and(|r| t_ns < r) {
             return Err(Refused::Late);
         }
-        if self.items.range((t_ns, kind, 0)..=(t_ns, kind, u64::MAX)).next().is_some() {
+        if self
+            .items
+            .range((t_ns, kind, 0)..=(t_ns, kind, u64::MAX))
+            .next()
+            .is_some()
+        {
             return Err(Refused::Duplicate);
         }
         self.seq += 1;
@@ -117,7 +122,9 @@ mod tests {
         b.push(7, 2, "cam").unwrap();
         b.push(7, 0, "imu").unwrap();
         b.push(7, 1, "gnss").unwrap();
-        let out: Vec<_> = std::iter::from_fn(|| b.pop_first()).map(|(_, x)| x).collect();
+        let out: Vec<_> = std::iter::from_fn(|| b.pop_first())
+            .map(|(_, x)| x)
+            .collect();
         assert_eq!(out, ["imu", "gnss", "cam"]);
     }
 

@@ -16,7 +16,10 @@ pub struct RunnerFactory {
 
 impl EngineFactory for RunnerFactory {
     fn create(&self, config: &VehicleConfig) -> Box<dyn Engine> {
-        Box::new(RunnerEngine { runner: VehicleRunner::new(config.clone(), self.params.clone(), None), last_t_ns: 0 })
+        Box::new(RunnerEngine {
+            runner: VehicleRunner::new(config.clone(), self.params.clone(), None),
+            last_t_ns: 0,
+        })
     }
 }
 
@@ -34,14 +37,19 @@ impl RunnerEngine {
         }
         EngineStep {
             poses: step.poses.iter().map(pose_to_wire).collect(),
-            work: step.job.map(|job| Box::new(move || Box::new(job.run()) as VisionResult) as _),
+            work: step
+                .job
+                .map(|job| Box::new(move || Box::new(job.run()) as VisionResult) as _),
         }
     }
 }
 
 impl Engine for RunnerEngine {
     fn push(&mut self, event: SensorEvent) -> Result<EngineStep, EngineError> {
-        let step = self.runner.push(event).map_err(|e| EngineError(e.to_string()))?;
+        let step = self
+            .runner
+            .push(event)
+            .map_err(|e| EngineError(e.to_string()))?;
         Ok(self.step(step))
     }
 

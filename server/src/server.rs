@@ -60,11 +60,15 @@ impl Server {
     }
 
     /// Starts the service with a given engine factory (tests plug scripted engines here).
-    pub async fn start_with(config: Config, factory: SharedFactory) -> anyhow::Result<RunningServer> {
+    pub async fn start_with(
+        config: Config,
+        factory: SharedFactory,
+    ) -> anyhow::Result<RunningServer> {
         config.check()?;
         let metrics = Metrics::new();
         let (hub, stop_tx) = Hub::new();
-        let pool = VisionPool::new(config.vision.effective_workers(), config.vision.queue).context("starting the vision pool")?;
+        let pool = VisionPool::new(config.vision.effective_workers(), config.vision.queue)
+            .context("starting the vision pool")?;
         let ctx = Arc::new(Ctx {
             vehicles: config.vehicles.clone(),
             health_period: Duration::from_millis(config.health.period_ms),
@@ -74,7 +78,10 @@ impl Server {
             factory,
         });
         let registry = Registry::new(ctx);
-        let limits = ImageLimits { max_bytes: config.vision.max_image_bytes, max_side_px: config.vision.max_image_side_px };
+        let limits = ImageLimits {
+            max_bytes: config.vision.max_image_bytes,
+            max_side_px: config.vision.max_image_side_px,
+        };
         let ingestor = Ingestor::new(Arc::clone(&registry), limits, config.grpc.max_message_bytes);
 
         let zenoh = if config.zenoh.enabled {
@@ -86,18 +93,41 @@ impl Server {
         health.set_serving::<UavNavServer<UavNavService>>().await;
         let (grpc_addr, grpc) = serve_grpc(&config, ingestor, health_service).await?;
         let ready = Arc::new(AtomicBool::new(true));
-        let (http_addr, http) =
-            serve_http(config.http.addr, HttpState { metrics, ready: Arc::clone(&ready) }).await?;
-        let zenoh_locators = zenoh.as_ref().map(|z| z.locators.clone()).unwrap_or_default();
+        let (http_addr, http) = serve_http(
+            config.http.addr,
+            HttpState {
+                metrics,
+                ready: Arc::clone(&ready),
+            },
+        )
+        .await?;
+        let zenoh_locators = zenoh
+            .as_ref()
+            .map(|z| z.locators.clone())
+            .unwrap_or_default();
         info!(%grpc_addr, %http_addr, zenoh = ?zenoh_locators, "uavnavd serving");
-        Ok(RunningServer { grpc_addr, http_addr, zenoh_locators, registry, stop_tx, ready, health, zenoh, grpc, http, pool })
+        Ok(RunningServer {
+            grpc_addr,
+            http_addr,
+            zenoh_locators,
+            registry,
+            stop_tx,
+            ready,
+            health,
+            zenoh,
+            grpc,
+            http,
+            pool,
+        })
     }
 }
 
 async fn serve_grpc(
     config: &Config,
     ingestor: Ingestor,
-    health_service: tonic_health::pb::health_server::HealthServer<impl tonic_health::pb::health_server::Health>,
+    health_service: tonic_health::pb::health_server::HealthServer<
+        impl tonic_health::pb::health_server::Health,
+    >,
 ) -> anyhow::Result<(SocketAddr, (JoinHandle<()>, oneshot::Sender<()>))> {
     let max = config.grpc.max_message_bytes;
     let service = UavNavServer::new(UavNavService::new(ingestor, config.grpc.ack_buffer))
@@ -125,26 +155,40 @@ async fn serve_grpc(
     let incoming = tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true));
     let (stop_tx, stop_rx) = oneshot::channel::<()>();
     let router = tonic::transport::Server::builder()
-        .layer(axum::middleware::map_response(remap_transport_status::<tonic::body::Body>))
+        .layer(axum::middleware::map_response(
+            remap_transport_status::<tonic::body::Body>,
+        ))
         .add_service(service)
         .add_service(health_service)
         .add_service(reflection_v1)
         .add_service(reflection_v1alpha);
     let task = tokio::spawn(async move {
-        if let Err(e) = router.serve_with_incoming_shutdown(incoming, async { let _ = stop_rx.await; }).await {
+        if let Err(e) = router
+            .serve_with_incoming_shutdown(incoming, async {
+                let _ = stop_rx.await;
+            })
+            .await
+        {
             warn!(error = %e, "gRPC server ended with an error");
         }
     });
     Ok((addr, (task, stop_tx)))
 }
 
-async fn serve_http(addr: SocketAddr, state: HttpState) -> anyhow::Result<(SocketAddr, (JoinHandle<()>, oneshot::Sender<()>))> {
-    let listener = tokio::net::TcpListener::bind(addr).await.with_context(|| format!("binding HTTP on {addr}"))?;
+async fn serve_http(
+    addr: SocketAddr,
+    state: HttpState,
+) -> anyhow::Result<(SocketAddr, (JoinHandle<()>, oneshot::Sender<()>))> {
+    let listener = tokio::net::TcpListener::bind(addr)
+        .await
+        .with_context(|| format!("binding HTTP on {addr}"))?;
     let bound = listener.local_addr()?;
     let (stop_tx, stop_rx) = oneshot::channel::<()>();
     let app = router(state);
     let task = tokio::spawn(async move {
-        let serve = axum::serve(listener, app).with_graceful_shutdown(async { let _ = stop_rx.await; });
+        let serve = axum::serve(listener, app).with_graceful_shutdown(async {
+            let _ = stop_rx.await;
+        });
         if let Err(e) = serve.await {
             warn!(error = %e, "HTTP server ended with an error");
         }
@@ -173,7 +217,9 @@ impl RunningServer {
     pub async fn shutdown(mut self) -> anyhow::Result<()> {
         info!("shutting down: draining vehicles");
         self.ready.store(false, Ordering::Release);
-        self.health.set_not_serving::<UavNavServer<UavNavService>>().await;
+        self.health
+            .set_not_serving::<UavNavServer<UavNavService>>()
+            .await;
         let _ = self.stop_tx.send(true);
         if let Some(z) = self.zenoh.as_mut() {
             z.stop_inputs();

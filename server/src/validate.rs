@@ -28,17 +28,26 @@ pub struct Rejection {
 impl Rejection {
     /// INVALID_ARGUMENT.
     pub fn invalid(reason: impl Into<String>) -> Self {
-        Self { status: pb::IngestStatus::InvalidArgument, reason: reason.into() }
+        Self {
+            status: pb::IngestStatus::InvalidArgument,
+            reason: reason.into(),
+        }
     }
 
     /// FAILED_PRECONDITION.
     pub fn precondition(reason: impl Into<String>) -> Self {
-        Self { status: pb::IngestStatus::FailedPrecondition, reason: reason.into() }
+        Self {
+            status: pb::IngestStatus::FailedPrecondition,
+            reason: reason.into(),
+        }
     }
 
     /// RESOURCE_EXHAUSTED.
     pub fn exhausted(reason: impl Into<String>) -> Self {
-        Self { status: pb::IngestStatus::ResourceExhausted, reason: reason.into() }
+        Self {
+            status: pb::IngestStatus::ResourceExhausted,
+            reason: reason.into(),
+        }
     }
 
     /// The matching gRPC status (for unary calls).
@@ -63,10 +72,17 @@ pub fn vehicle_id(id: &str) -> Check<()> {
         return Err(Rejection::invalid("vehicle_id: must not be empty"));
     }
     if id.len() > MAX_ID_LEN {
-        return Err(Rejection::invalid(format!("vehicle_id: longer than {MAX_ID_LEN} characters")));
+        return Err(Rejection::invalid(format!(
+            "vehicle_id: longer than {MAX_ID_LEN} characters"
+        )));
     }
-    if let Some(c) = id.chars().find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '_' | '.' | '-'))) {
-        return Err(Rejection::invalid(format!("vehicle_id: character {c:?} not allowed (use [A-Za-z0-9_.-])")));
+    if let Some(c) = id
+        .chars()
+        .find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '_' | '.' | '-')))
+    {
+        return Err(Rejection::invalid(format!(
+            "vehicle_id: character {c:?} not allowed (use [A-Za-z0-9_.-])"
+        )));
     }
     Ok(())
 }
@@ -82,11 +98,17 @@ pub fn imu_batch(b: &pb::ImuBatch) -> Check<Vec<ImuSample>> {
         return Err(Rejection::invalid("imu.samples: empty batch"));
     }
     if b.samples.len() > MAX_IMU_BATCH {
-        return Err(Rejection::exhausted(format!("imu.samples: {} samples, limit {MAX_IMU_BATCH}", b.samples.len())));
+        return Err(Rejection::exhausted(format!(
+            "imu.samples: {} samples, limit {MAX_IMU_BATCH}",
+            b.samples.len()
+        )));
     }
     let samples = convert::sensors::imu_batch(b).map_err(|e| invalid_in("imu", e))?;
     if let Some((i, s)) = samples.iter().enumerate().find(|(_, s)| s.t_ns < 0) {
-        return Err(Rejection::invalid(format!("imu.samples[{i}].t_ns: {} is negative", s.t_ns)));
+        return Err(Rejection::invalid(format!(
+            "imu.samples[{i}].t_ns: {} is negative",
+            s.t_ns
+        )));
     }
     Ok(samples)
 }
@@ -95,7 +117,10 @@ pub fn imu_batch(b: &pb::ImuBatch) -> Check<Vec<ImuSample>> {
 pub fn gnss_fix(g: &pb::GnssFix) -> Check<GnssFix> {
     let fix = GnssFix::try_from(g).map_err(|e| invalid_in("gnss", e))?;
     if fix.t_ns < 0 {
-        return Err(Rejection::invalid(format!("gnss.t_ns: {} is negative", fix.t_ns)));
+        return Err(Rejection::invalid(format!(
+            "gnss.t_ns: {} is negative",
+            fix.t_ns
+        )));
     }
     Ok(fix)
 }
@@ -121,7 +146,11 @@ pub struct ImageLimits {
 }
 
 /// Validates a camera frame against the vehicle's camera (if any) and converts it.
-pub fn camera_frame(c: &pb::CameraFrame, camera: Option<CameraSpec>, limits: ImageLimits) -> Check<CameraFrame> {
+pub fn camera_frame(
+    c: &pb::CameraFrame,
+    camera: Option<CameraSpec>,
+    limits: ImageLimits,
+) -> Check<CameraFrame> {
     let Some(spec) = camera else {
         return Err(Rejection::precondition(
             "camera: the vehicle has no camera configuration (send a VehicleConfig with `camera` first)",
@@ -136,17 +165,28 @@ pub fn camera_frame(c: &pb::CameraFrame, camera: Option<CameraSpec>, limits: Ima
     // Size first: the conversion copies the bytes.
     let size = c.image.as_ref().map_or(0, |i| i.data.len());
     if size > limits.max_bytes {
-        return Err(Rejection::exhausted(format!("camera.image.data: {size} bytes, limit {}", limits.max_bytes)));
+        return Err(Rejection::exhausted(format!(
+            "camera.image.data: {size} bytes, limit {}",
+            limits.max_bytes
+        )));
     }
     let frame = CameraFrame::try_from(c).map_err(|e| invalid_in("camera", e))?;
     if frame.t_ns < 0 {
-        return Err(Rejection::invalid(format!("camera.t_ns: {} is negative", frame.t_ns)));
+        return Err(Rejection::invalid(format!(
+            "camera.t_ns: {} is negative",
+            frame.t_ns
+        )));
     }
     let (w, h) = match frame.format {
         ImageFormat::Jpeg => jpeg_dimensions(&frame.data),
         ImageFormat::Png => png_dimensions(&frame.data),
     }
-    .ok_or_else(|| Rejection::invalid(format!("camera.image.data: corrupt {} header", frame.format.as_str())))?;
+    .ok_or_else(|| {
+        Rejection::invalid(format!(
+            "camera.image.data: corrupt {} header",
+            frame.format.as_str()
+        ))
+    })?;
     if w > limits.max_side_px || h > limits.max_side_px {
         return Err(Rejection::exhausted(format!(
             "camera.image: {w}x{h} px exceeds the {} px limit",
@@ -207,7 +247,10 @@ pub fn png_dimensions(d: &[u8]) -> Option<(u32, u32)> {
 }
 
 /// Validates a vehicle configuration and converts it; also returns the camera spec for frames.
-pub fn vehicle_config(c: &pb::VehicleConfig, max_side_px: u32) -> Check<(VehicleConfig, Option<CameraSpec>)> {
+pub fn vehicle_config(
+    c: &pb::VehicleConfig,
+    max_side_px: u32,
+) -> Check<(VehicleConfig, Option<CameraSpec>)> {
     let config = VehicleConfig::try_from(c).map_err(|e| invalid_in("config", e))?;
     let spec = match (&c.camera, &config.camera) {
         (Some(wire), Some(cam)) => {
@@ -217,7 +260,11 @@ pub fn vehicle_config(c: &pb::VehicleConfig, max_side_px: u32) -> Check<(Vehicle
                     "config.camera: {width}x{height} px exceeds the {max_side_px} px limit"
                 )));
             }
-            Some(CameraSpec { camera_id: wire.camera_id, width, height })
+            Some(CameraSpec {
+                camera_id: wire.camera_id,
+                width,
+                height,
+            })
         }
         _ => None,
     };
@@ -238,11 +285,26 @@ mod tests {
 
     #[test]
     fn imu_backwards_and_nan_name_the_field() {
-        let s = |t, gx| pb::ImuSample { t_ns: t, gyro_x_radps: gx, accel_z_mps2: -9.8, ..Default::default() };
-        let e = imu_batch(&pb::ImuBatch { samples: vec![s(10, 0.0), s(5, 0.0)] }).unwrap_err();
+        let s = |t, gx| pb::ImuSample {
+            t_ns: t,
+            gyro_x_radps: gx,
+            accel_z_mps2: -9.8,
+            ..Default::default()
+        };
+        let e = imu_batch(&pb::ImuBatch {
+            samples: vec![s(10, 0.0), s(5, 0.0)],
+        })
+        .unwrap_err();
         assert!(e.reason.starts_with("imu.samples[1].t_ns"), "{}", e.reason);
-        let e = imu_batch(&pb::ImuBatch { samples: vec![s(10, f64::NAN)] }).unwrap_err();
-        assert!(e.reason.starts_with("imu.samples[0].gyro_x_radps"), "{}", e.reason);
+        let e = imu_batch(&pb::ImuBatch {
+            samples: vec![s(10, f64::NAN)],
+        })
+        .unwrap_err();
+        assert!(
+            e.reason.starts_with("imu.samples[0].gyro_x_radps"),
+            "{}",
+            e.reason
+        );
         assert_eq!(e.status, pb::IngestStatus::InvalidArgument);
     }
 
@@ -250,7 +312,9 @@ mod tests {
     fn jpeg_header_parsing() {
         // SOI, APP0 (len 4, 2 payload bytes), SOF0 with 480x640.
         let mut d = vec![0xFF, 0xD8, 0xFF, 0xE0, 0x00, 0x04, 0, 0];
-        d.extend([0xFF, 0xC0, 0x00, 0x0B, 8, 0x01, 0xE0, 0x02, 0x80, 1, 1, 0x11, 0]);
+        d.extend([
+            0xFF, 0xC0, 0x00, 0x0B, 8, 0x01, 0xE0, 0x02, 0x80, 1, 1, 0x11, 0,
+        ]);
         assert_eq!(jpeg_dimensions(&d), Some((640, 480)));
         assert_eq!(jpeg_dimensions(&d[..12]), None, "truncated");
         assert_eq!(jpeg_dimensions(&[0xFF, 0xD8, 0x00, 0x01]), None, "garbage");

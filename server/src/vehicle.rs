@@ -113,7 +113,10 @@ impl TimeGate {
             }
         }
         if self.last_ns[kind as usize] == Some(t_ns) {
-            return Err(GateRefusal::Late(format!("{}: duplicate t_ns {t_ns}", field())));
+            return Err(GateRefusal::Late(format!(
+                "{}: duplicate t_ns {t_ns}",
+                field()
+            )));
         }
         self.last_ns[kind as usize] = Some(t_ns);
         self.newest_ns = Some(self.newest_ns.map_or(t_ns, |n| n.max(t_ns)));
@@ -216,11 +219,30 @@ mod tests {
     fn gate_refuses_late_duplicate_and_future() {
         let mut g = TimeGate::default();
         let (w, f) = (100, 1_000);
-        assert!(g.admit(InputKind::Imu, 1_000, w, f, || "imu".into()).is_ok());
-        assert!(matches!(g.admit(InputKind::Imu, 1_000, w, f, || "imu".into()), Err(GateRefusal::Late(_))));
-        assert!(g.admit(InputKind::Gnss, 950, w, f, || "gnss".into()).is_ok(), "within the window");
-        assert!(matches!(g.admit(InputKind::Gnss, 800, w, f, || "gnss".into()), Err(GateRefusal::Late(_))));
-        assert!(matches!(g.admit(InputKind::Imu, 3_000, w, f, || "imu".into()), Err(GateRefusal::Future(_))));
-        assert!(g.admit(InputKind::Imu, 1_900, w, f, || "imu".into()).is_ok());
+        assert!(
+            g.admit(InputKind::Imu, 1_000, w, f, || "imu".into())
+                .is_ok()
+        );
+        assert!(matches!(
+            g.admit(InputKind::Imu, 1_000, w, f, || "imu".into()),
+            Err(GateRefusal::Late(_))
+        ));
+        assert!(
+            g.admit(InputKind::Gnss, 950, w, f, || "gnss".into())
+                .is_ok(),
+            "within the window"
+        );
+        assert!(matches!(
+            g.admit(InputKind::Gnss, 800, w, f, || "gnss".into()),
+            Err(GateRefusal::Late(_))
+        ));
+        assert!(matches!(
+            g.admit(InputKind::Imu, 3_000, w, f, || "imu".into()),
+            Err(GateRefusal::Future(_))
+        ));
+        assert!(
+            g.admit(InputKind::Imu, 1_900, w, f, || "imu".into())
+                .is_ok()
+        );
     }
 }

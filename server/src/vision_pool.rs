@@ -55,7 +55,11 @@ impl VisionPool {
         let mut handles = Vec::with_capacity(n);
         for i in 0..n {
             let (rx, state) = (Arc::clone(&rx), Arc::clone(&state));
-            handles.push(std::thread::Builder::new().name(format!("uavnav-vision-{i}")).spawn(move || worker(rx, state))?);
+            handles.push(
+                std::thread::Builder::new()
+                    .name(format!("uavnav-vision-{i}"))
+                    .spawn(move || worker(rx, state))?,
+            );
         }
         Ok(Arc::new(Self {
             tx: Mutex::new(Some(tx)),
@@ -99,7 +103,11 @@ impl VisionPool {
         if let Ok(mut tx) = self.tx.lock() {
             tx.take();
         }
-        let handles = self.workers.lock().map(|mut w| std::mem::take(&mut *w)).unwrap_or_default();
+        let handles = self
+            .workers
+            .lock()
+            .map(|mut w| std::mem::take(&mut *w))
+            .unwrap_or_default();
         for h in handles {
             let _ = h.join();
         }

@@ -60,22 +60,31 @@ pub fn encoding(full_name: &str) -> Encoding {
 /// Builds the session configuration from ours (the JSON5 file first, then our keys on top).
 pub fn session_config(cfg: &ZenohConfig) -> anyhow::Result<zenoh::Config> {
     let mut z = match &cfg.config_file {
-        Some(path) => zenoh::Config::from_file(path).map_err(|e| anyhow!("zenoh config {}: {e}", path.display()))?,
+        Some(path) => zenoh::Config::from_file(path)
+            .map_err(|e| anyhow!("zenoh config {}: {e}", path.display()))?,
         None => zenoh::Config::default(),
     };
     let json = |v: &[String]| serde_json_list(v);
     let set = |z: &mut zenoh::Config, key: &str, value: String| {
-        z.insert_json5(key, &value).map_err(|e| anyhow!("zenoh config {key}={value}: {e}"))
+        z.insert_json5(key, &value)
+            .map_err(|e| anyhow!("zenoh config {key}={value}: {e}"))
     };
     set(&mut z, "mode", format!("\"{}\"", cfg.mode.as_str()))?;
     set(&mut z, "listen/endpoints", json(&cfg.listen))?;
     set(&mut z, "connect/endpoints", json(&cfg.connect))?;
-    set(&mut z, "scouting/multicast/enabled", cfg.multicast_scouting.to_string())?;
+    set(
+        &mut z,
+        "scouting/multicast/enabled",
+        cfg.multicast_scouting.to_string(),
+    )?;
     Ok(z)
 }
 
 fn serde_json_list(v: &[String]) -> String {
-    let items: Vec<String> = v.iter().map(|s| format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\""))).collect();
+    let items: Vec<String> = v
+        .iter()
+        .map(|s| format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\"")))
+        .collect();
     format!("[{}]", items.join(","))
 }
 
@@ -92,10 +101,16 @@ pub struct ZenohIo {
 impl ZenohIo {
     /// Opens the session and starts the input, output and query tasks.
     pub async fn start(cfg: &ZenohConfig, ingestor: Ingestor, hub: Hub) -> anyhow::Result<Self> {
-        let session = zenoh::open(session_config(cfg)?).await.map_err(|e| anyhow!("opening the zenoh session: {e}"))?;
+        let session = zenoh::open(session_config(cfg)?)
+            .await
+            .map_err(|e| anyhow!("opening the zenoh session: {e}"))?;
         // Zenoh 1.x does not expose the bound locators on the session: report the configured ones.
         let locators = cfg.listen.clone();
-        let instance = if cfg.instance.is_empty() { default_instance() } else { cfg.instance.clone() };
+        let instance = if cfg.instance.is_empty() {
+            default_instance()
+        } else {
+            cfg.instance.clone()
+        };
         let service_token = session
             .liveliness()
             .declare_token(format!("{SERVICE_PREFIX}/{instance}"))
@@ -105,11 +120,26 @@ impl ZenohIo {
         let mut tasks = Vec::new();
         tasks.push(spawn_inputs(&session, ingestor.clone()).await?);
         tasks.push(spawn_queries(&session, ingestor.clone()).await?);
-        tasks.push(spawn_liveliness(&session, hub.lifecycle.subscribe(), service_token));
+        tasks.push(spawn_liveliness(
+            &session,
+            hub.lifecycle.subscribe(),
+            service_token,
+        ));
         let (done_tx, done_rx) = oneshot::channel();
-        let out = publish_outputs(session.clone(), hub.poses.subscribe(), hub.health.subscribe(), ingestor, done_rx);
+        let out = publish_outputs(
+            session.clone(),
+            hub.poses.subscribe(),
+            hub.health.subscribe(),
+            ingestor,
+            done_rx,
+        );
         let output = Some((tokio::spawn(out), done_tx));
-        Ok(Self { session, tasks, output, locators })
+        Ok(Self {
+            session,
+            tasks,
+            output,
+            locators,
+        })
     }
 
     /// Stops taking input (first step of shutdown).
@@ -132,9 +162,18 @@ impl ZenohIo {
 }
 
 fn default_instance() -> String {
-    let host = std::fs::read_to_string("/etc/hostname").map(|s| s.trim().to_string()).unwrap_or_default();
-    let host: String = host.chars().filter(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.')).collect();
-    format!("{}-{}", if host.is_empty() { "uavnavd" } else { &host }, std::process::id())
+    let host = std::fs::read_to_string("/etc/hostname")
+        .map(|s| s.trim().to_string())
+        .unwrap_or_default();
+    let host: String = host
+        .chars()
+        .filter(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+        .collect();
+    format!(
+        "{}-{}",
+        if host.is_empty() { "uavnavd" } else { &host },
+        std::process::id()
+    )
 }
 
 /// `uavnav/v1/vehicle/{id}/{leaf}` → (id, leaf).
@@ -145,7 +184,10 @@ fn split_vehicle_key(key: &str) -> Option<(&str, &str)> {
 }
 
 async fn spawn_inputs(session: &Session, ingestor: Ingestor) -> anyhow::Result<JoinHandle<()>> {
-    let sub = session.declare_subscriber(INPUT_KEYS).await.map_err(|e| anyhow!("subscribing to {INPUT_KEYS}: {e}"))?;
+    let sub = session
+        .declare_subscriber(INPUT_KEYS)
+        .await
+        .map_err(|e| anyhow!("subscribing to {INPUT_KEYS}: {e}"))?;
     let max_bytes = ingestor.max_message_bytes();
     let mut shards = Vec::with_capacity(SHARDS);
     let mut shard_tasks = Vec::with_capacity(SHARDS);
@@ -157,7 +199,8 @@ async fn spawn_inputs(session: &Session, ingestor: Ingestor) -> anyhow::Result<J
     Ok(tokio::spawn(async move {
         let _guard = AbortOnDrop(shard_tasks);
         while let Ok(sample) = sub.recv_async().await {
-            let shard = split_vehicle_key(sample.key_expr().as_str()).map_or(0, |(id, _)| shard_of(id));
+            let shard =
+                split_vehicle_key(sample.key_expr().as_str()).map_or(0, |(id, _)| shard_of(id));
             if shards[shard].send(sample).await.is_err() {
                 break;
             }
@@ -181,9 +224,15 @@ fn shard_of(id: &str) -> usize {
     (h.finish() % SHARDS as u64) as usize
 }
 
-async fn decode_loop(mut rx: mpsc::Receiver<zenoh::sample::Sample>, ingestor: Ingestor, max_bytes: usize) {
+async fn decode_loop(
+    mut rx: mpsc::Receiver<zenoh::sample::Sample>,
+    ingestor: Ingestor,
+    max_bytes: usize,
+) {
     while let Some(sample) = rx.recv().await {
-        let Some((id, leaf)) = split_vehicle_key(sample.key_expr().as_str()) else { continue };
+        let Some((id, leaf)) = split_vehicle_key(sample.key_expr().as_str()) else {
+            continue;
+        };
         // Our own outputs match `*/*` too (pose, health): not inputs.
         let kind = match leaf {
             "imu" => Kind::Imu,
@@ -194,14 +243,24 @@ async fn decode_loop(mut rx: mpsc::Receiver<zenoh::sample::Sample>, ingestor: In
         };
         let bytes = sample.payload().to_bytes();
         if bytes.len() > max_bytes {
-            reject(&ingestor, id, kind, Outcome::Exhausted, &format!("{} bytes, limit {max_bytes}", bytes.len()));
+            reject(
+                &ingestor,
+                id,
+                kind,
+                Outcome::Exhausted,
+                &format!("{} bytes, limit {max_bytes}", bytes.len()),
+            );
             continue;
         }
         let verdict = match kind {
-            Kind::Imu => decode::<pb::ImuBatch>(&bytes).map(|m| (ingestor.clone(), id.to_owned(), In::Imu(m))),
-            Kind::Gnss => decode::<pb::GnssFix>(&bytes).map(|m| (ingestor.clone(), id.to_owned(), In::Gnss(m))),
-            Kind::Camera => decode::<pb::CameraFrame>(&bytes).map(|m| (ingestor.clone(), id.to_owned(), In::Camera(m))),
-            _ => decode::<pb::VehicleConfig>(&bytes).map(|m| (ingestor.clone(), id.to_owned(), In::Config(m))),
+            Kind::Imu => decode::<pb::ImuBatch>(&bytes)
+                .map(|m| (ingestor.clone(), id.to_owned(), In::Imu(m))),
+            Kind::Gnss => decode::<pb::GnssFix>(&bytes)
+                .map(|m| (ingestor.clone(), id.to_owned(), In::Gnss(m))),
+            Kind::Camera => decode::<pb::CameraFrame>(&bytes)
+                .map(|m| (ingestor.clone(), id.to_owned(), In::Camera(m))),
+            _ => decode::<pb::VehicleConfig>(&bytes)
+                .map(|m| (ingestor.clone(), id.to_owned(), In::Config(m))),
         };
         match verdict {
             Ok((ing, id, msg)) => {
@@ -210,7 +269,13 @@ async fn decode_loop(mut rx: mpsc::Receiver<zenoh::sample::Sample>, ingestor: In
                     debug!(vehicle = %id, status = ?v.status, reason = %v.reason, "zenoh input refused");
                 }
             }
-            Err(e) => reject(&ingestor, id, kind, Outcome::Invalid, &format!("malformed protobuf: {e}")),
+            Err(e) => reject(
+                &ingestor,
+                id,
+                kind,
+                Outcome::Invalid,
+                &format!("malformed protobuf: {e}"),
+            ),
         }
     }
 }
@@ -239,7 +304,11 @@ fn decode<M: Message + Default>(bytes: &[u8]) -> Result<M, prost::DecodeError> {
 
 /// Counts a refusal that never reached [`Ingestor::submit`] (undecodable or oversize).
 fn reject(ingestor: &Ingestor, id: &str, kind: Kind, outcome: Outcome, reason: &str) {
-    ingestor.registry().ctx().metrics.input(Transport::Zenoh, kind, outcome, 1);
+    ingestor
+        .registry()
+        .ctx()
+        .metrics
+        .input(Transport::Zenoh, kind, outcome, 1);
     if let Some(h) = ingestor.registry().get(id) {
         VehicleStats::add(&h.shared.stats.rejected, 1);
     }
@@ -247,8 +316,14 @@ fn reject(ingestor: &Ingestor, id: &str, kind: Kind, outcome: Outcome, reason: &
 }
 
 async fn spawn_queries(session: &Session, ingestor: Ingestor) -> anyhow::Result<JoinHandle<()>> {
-    let poses = session.declare_queryable(POSE_LATEST_KEYS).await.map_err(|e| anyhow!("queryable {POSE_LATEST_KEYS}: {e}"))?;
-    let list = session.declare_queryable(VEHICLES_KEY).await.map_err(|e| anyhow!("queryable {VEHICLES_KEY}: {e}"))?;
+    let poses = session
+        .declare_queryable(POSE_LATEST_KEYS)
+        .await
+        .map_err(|e| anyhow!("queryable {POSE_LATEST_KEYS}: {e}"))?;
+    let list = session
+        .declare_queryable(VEHICLES_KEY)
+        .await
+        .map_err(|e| anyhow!("queryable {VEHICLES_KEY}: {e}"))?;
     Ok(tokio::spawn(async move {
         loop {
             tokio::select! {
@@ -274,17 +349,26 @@ async fn answer_pose(q: &zenoh::query::Query, ingestor: &Ingestor) {
     let wanted = q.key_expr().clone();
     for h in ingestor.registry().list("") {
         let key = format!("{VEHICLE_PREFIX}/{}/pose/latest", h.shared.id);
-        let Ok(ke) = KeyExpr::try_from(key.as_str()) else { continue };
+        let Ok(ke) = KeyExpr::try_from(key.as_str()) else {
+            continue;
+        };
         if !wanted.intersects(&ke) {
             continue;
         }
         if let Some(p) = h.shared.pose() {
-            let _ = q.reply(ke, p.encode_to_vec()).encoding(encoding("uavnav.v1.PoseEstimate")).await;
+            let _ = q
+                .reply(ke, p.encode_to_vec())
+                .encoding(encoding("uavnav.v1.PoseEstimate"))
+                .await;
         }
     }
 }
 
-fn spawn_liveliness(session: &Session, mut rx: broadcast::Receiver<(Arc<str>, bool)>, service: LivelinessToken) -> JoinHandle<()> {
+fn spawn_liveliness(
+    session: &Session,
+    mut rx: broadcast::Receiver<(Arc<str>, bool)>,
+    service: LivelinessToken,
+) -> JoinHandle<()> {
     let session = session.clone();
     tokio::spawn(async move {
         let _service = service;
@@ -292,11 +376,17 @@ fn spawn_liveliness(session: &Session, mut rx: broadcast::Receiver<(Arc<str>, bo
         loop {
             match rx.recv().await {
                 Ok((id, true)) => {
-                    match session.liveliness().declare_token(format!("{VEHICLE_PREFIX}/{id}/alive")).await {
+                    match session
+                        .liveliness()
+                        .declare_token(format!("{VEHICLE_PREFIX}/{id}/alive"))
+                        .await
+                    {
                         Ok(t) => {
                             tokens.insert(id, t);
                         }
-                        Err(e) => warn!(vehicle = %id, error = %e, "declaring the vehicle liveliness token"),
+                        Err(e) => {
+                            warn!(vehicle = %id, error = %e, "declaring the vehicle liveliness token")
+                        }
                     }
                 }
                 Ok((id, false)) => {
@@ -319,7 +409,11 @@ async fn publish_outputs(
     mut done: oneshot::Receiver<()>,
 ) {
     let metrics = ingestor.registry().ctx().metrics.clone();
-    let out = Outputs { session, pose_enc: encoding("uavnav.v1.PoseEstimate"), health_enc: encoding("uavnav.v1.VehicleHealth") };
+    let out = Outputs {
+        session,
+        pose_enc: encoding("uavnav.v1.PoseEstimate"),
+        health_enc: encoding("uavnav.v1.VehicleHealth"),
+    };
     loop {
         tokio::select! {
             biased;
@@ -356,11 +450,21 @@ struct Outputs {
 
 impl Outputs {
     async fn pose(&self, p: &pb::PoseEstimate) {
-        self.put(format!("{VEHICLE_PREFIX}/{}/pose", p.vehicle_id), p.encode_to_vec(), &self.pose_enc).await;
+        self.put(
+            format!("{VEHICLE_PREFIX}/{}/pose", p.vehicle_id),
+            p.encode_to_vec(),
+            &self.pose_enc,
+        )
+        .await;
     }
 
     async fn health(&self, h: &pb::VehicleHealth) {
-        self.put(format!("{VEHICLE_PREFIX}/{}/health", h.vehicle_id), h.encode_to_vec(), &self.health_enc).await;
+        self.put(
+            format!("{VEHICLE_PREFIX}/{}/health", h.vehicle_id),
+            h.encode_to_vec(),
+            &self.health_enc,
+        )
+        .await;
     }
 
     async fn put(&self, key: String, body: Vec<u8>, enc: &Encoding) {

@@ -54,7 +54,10 @@ pub fn finish(result: CliResult) -> ExitCode {
 }
 
 fn chain(e: &anyhow::Error) -> String {
-    e.chain().map(|c| c.to_string()).collect::<Vec<_>>().join(": ")
+    e.chain()
+        .map(|c| c.to_string())
+        .collect::<Vec<_>>()
+        .join(": ")
 }
 
 /// A progress bar on stderr (hidden when stderr is not a terminal).

@@ -31,7 +31,11 @@ pub fn run(args: Args) -> CliResult {
         s.gnss,
         s.frames,
         s.truth,
-        if s.skipped_images > 0 { format!(" ({} rows without an image skipped)", s.skipped_images) } else { String::new() },
+        if s.skipped_images > 0 {
+            format!(" ({} rows without an image skipped)", s.skipped_images)
+        } else {
+            String::new()
+        },
         started.elapsed().as_secs_f64()
     );
     Ok(())
@@ -42,17 +46,42 @@ pub enum Sink {
     /// ASL folder.
     Asl(AslWriter),
     /// MCAP recording; truth is interleaved in time order.
-    Mcap { writer: McapWriter, vehicle: String, truth: Vec<TruthSample>, started: bool, config: VehicleConfig, origin: Option<Lla> },
+    Mcap {
+        writer: McapWriter,
+        vehicle: String,
+        truth: Vec<TruthSample>,
+        started: bool,
+        config: VehicleConfig,
+        origin: Option<Lla>,
+    },
 }
 
 impl Sink {
     /// Creates the sink chosen by the path's extension.
-    pub fn create(path: &Path, vehicle: &str, config: &VehicleConfig, origin: Option<Lla>) -> Result<Self, CliError> {
-        if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("mcap")) {
-            let writer = McapWriter::create(path, &McapOptions::default()).map_err(CliError::runtime)?;
-            Ok(Sink::Mcap { writer, vehicle: vehicle.to_string(), truth: Vec::new(), started: false, config: config.clone(), origin })
+    pub fn create(
+        path: &Path,
+        vehicle: &str,
+        config: &VehicleConfig,
+        origin: Option<Lla>,
+    ) -> Result<Self, CliError> {
+        if path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
+        {
+            let writer =
+                McapWriter::create(path, &McapOptions::default()).map_err(CliError::runtime)?;
+            Ok(Sink::Mcap {
+                writer,
+                vehicle: vehicle.to_string(),
+                truth: Vec::new(),
+                started: false,
+                config: config.clone(),
+                origin,
+            })
         } else {
-            Ok(Sink::Asl(AslWriter::create(path, vehicle, config, origin).map_err(CliError::runtime)?))
+            Ok(Sink::Asl(
+                AslWriter::create(path, vehicle, config, origin).map_err(CliError::runtime)?,
+            ))
         }
     }
 
@@ -60,13 +89,26 @@ impl Sink {
     pub fn write_event(&mut self, ev: &SensorEvent) -> Result<(), CliError> {
         match self {
             Sink::Asl(w) => w.write_event(ev).map_err(CliError::runtime),
-            Sink::Mcap { writer, vehicle, started, config, origin, .. } => {
+            Sink::Mcap {
+                writer,
+                vehicle,
+                started,
+                config,
+                origin,
+                ..
+            } => {
                 if !*started {
-                    writer.write_config(vehicle, config, ev.t_ns()).map_err(CliError::runtime)?;
-                    writer.write_info(vehicle, origin.as_ref(), ev.t_ns()).map_err(CliError::runtime)?;
+                    writer
+                        .write_config(vehicle, config, ev.t_ns())
+                        .map_err(CliError::runtime)?;
+                    writer
+                        .write_info(vehicle, origin.as_ref(), ev.t_ns())
+                        .map_err(CliError::runtime)?;
                     *started = true;
                 }
-                writer.write_event(vehicle, ev, ev.t_ns()).map_err(CliError::runtime)
+                writer
+                    .write_event(vehicle, ev, ev.t_ns())
+                    .map_err(CliError::runtime)
             }
         }
     }
@@ -86,9 +128,16 @@ impl Sink {
     pub fn finish(self) -> Result<(), CliError> {
         match self {
             Sink::Asl(w) => w.finish().map_err(CliError::runtime),
-            Sink::Mcap { mut writer, vehicle, truth, .. } => {
+            Sink::Mcap {
+                mut writer,
+                vehicle,
+                truth,
+                ..
+            } => {
                 for s in &truth {
-                    writer.write_truth(&vehicle, s, s.t_ns).map_err(CliError::runtime)?;
+                    writer
+                        .write_truth(&vehicle, s, s.t_ns)
+                        .map_err(CliError::runtime)?;
                 }
                 writer.finish().map_err(CliError::runtime)
             }

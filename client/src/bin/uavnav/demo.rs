@@ -48,7 +48,8 @@ pub fn run(args: Args) -> CliResult {
 async fn demo(args: Args) -> CliResult {
     let scenario = match &args.scenario {
         Some(p) => crate::simulate::load_scenario(p)?,
-        None => Scenario::from_toml_str(SMOKE).map_err(|e| CliError::input(anyhow::anyhow!("smoke scenario: {e}")))?,
+        None => Scenario::from_toml_str(SMOKE)
+            .map_err(|e| CliError::input(anyhow::anyhow!("smoke scenario: {e}")))?,
     };
     let started = Instant::now();
     let flight = Flight::new(&scenario).map_err(|e| CliError::input(anyhow::anyhow!("{e}")))?;
@@ -56,35 +57,71 @@ async fn demo(args: Args) -> CliResult {
         .events()
         .collect::<Result<_, _>>()
         .map_err(|e| CliError::runtime(anyhow::anyhow!("simulation failed: {e}")))?;
-    eprintln!("demo: simulated {:.0} s flight ({} events) in {:.1} s", scenario.duration_s, events.len(), started.elapsed().as_secs_f64());
+    eprintln!(
+        "demo: simulated {:.0} s flight ({} events) in {:.1} s",
+        scenario.duration_s,
+        events.len(),
+        started.elapsed().as_secs_f64()
+    );
 
     let zenoh_port = free_port()?;
-    let server = uavnavd::Server::start(service_config(zenoh_port)).await.context("starting uavnavd")?;
-    eprintln!("demo: uavnavd on grpc://{} (HTTP {}), Zenoh tcp/127.0.0.1:{zenoh_port}", server.grpc_addr, server.http_addr);
-    let grpc = Client::connect_url(&format!("grpc://{}", server.grpc_addr)).await.context("gRPC client")?;
-    let zenoh = Client::connect_url(&format!("zenoh/tcp/127.0.0.1:{zenoh_port}")).await.context("Zenoh client")?;
-    let mut watch = grpc.watch_poses(Selector::prefix("demo-")).await.context("watching poses")?;
+    let server = uavnavd::Server::start(service_config(zenoh_port))
+        .await
+        .context("starting uavnavd")?;
+    eprintln!(
+        "demo: uavnavd on grpc://{} (HTTP {}), Zenoh tcp/127.0.0.1:{zenoh_port}",
+        server.grpc_addr, server.http_addr
+    );
+    let grpc = Client::connect_url(&format!("grpc://{}", server.grpc_addr))
+        .await
+        .context("gRPC client")?;
+    let zenoh = Client::connect_url(&format!("zenoh/tcp/127.0.0.1:{zenoh_port}"))
+        .await
+        .context("Zenoh client")?;
+    let mut watch = grpc
+        .watch_poses(Selector::prefix("demo-"))
+        .await
+        .context("watching poses")?;
     tokio::time::sleep(Duration::from_millis(300)).await; // let the subscription settle
 
     let config = flight.vehicle_config();
     let wire_config = pb::VehicleConfig::from(&config);
-    let messages = schedule::build(Some(&wire_config), events.iter().cloned(), &schedule::ScheduleParams::default());
+    let messages = schedule::build(
+        Some(&wire_config),
+        events.iter().cloned(),
+        &schedule::ScheduleParams::default(),
+    );
     let feeds = [(grpc, VEHICLES[0]), (zenoh, VEHICLES[1])].map(|(client, id)| {
         let msgs = messages.clone();
         tokio::spawn(async move { feed(client, id, msgs).await })
     });
-    let last_imu_t = events.iter().rev().find_map(|e| matches!(e, SensorEvent::Imu(_)).then(|| e.t_ns())).unwrap_or(0);
-    let received = collect(&mut watch, last_imu_t, Duration::from_secs_f64(args.timeout_s)).await;
+    let last_imu_t = events
+        .iter()
+        .rev()
+        .find_map(|e| matches!(e, SensorEvent::Imu(_)).then(|| e.t_ns()))
+        .unwrap_or(0);
+    let received = collect(
+        &mut watch,
+        last_imu_t,
+        Duration::from_secs_f64(args.timeout_s),
+    )
+    .await;
     for f in feeds {
-        f.await.context("feeding task")?.map_err(CliError::runtime)?;
+        f.await
+            .context("feeding task")?
+            .map_err(CliError::runtime)?;
     }
     server.shutdown().await.context("stopping uavnavd")?;
 
     let offline = offline_run(&config, &events);
     print_table(&flight, &received, &offline);
-    let ok = VEHICLES.iter().all(|v| received.get(*v).is_some_and(|p| !p.is_empty()));
+    let ok = VEHICLES
+        .iter()
+        .all(|v| received.get(*v).is_some_and(|p| !p.is_empty()));
     if !ok {
-        return Err(CliError::Target("some vehicle produced no pose through the service".into()));
+        return Err(CliError::Target(
+            "some vehicle produced no pose through the service".into(),
+        ));
     }
     eprintln!("demo: done in {:.1} s", started.elapsed().as_secs_f64());
     Ok(())
@@ -105,10 +142,20 @@ fn free_port() -> Result<u16, CliError> {
     Ok(l.local_addr().context("finding a free port")?.port())
 }
 
-async fn feed(client: Client, id: &'static str, msgs: Vec<schedule::TimedMessage>) -> anyhow::Result<()> {
-    let ingest = client.ingest().await.with_context(|| format!("opening the ingest stream for {id}"))?;
+async fn feed(
+    client: Client,
+    id: &'static str,
+    msgs: Vec<schedule::TimedMessage>,
+) -> anyhow::Result<()> {
+    let ingest = client
+        .ingest()
+        .await
+        .with_context(|| format!("opening the ingest stream for {id}"))?;
     for m in msgs {
-        ingest.send(id, m.payload).await.with_context(|| format!("sending {id}'s data"))?;
+        ingest
+            .send(id, m.payload)
+            .await
+            .with_context(|| format!("sending {id}'s data"))?;
     }
     let stats = ingest.finish(Duration::from_secs(30)).await;
     let sent = stats.sent.load(std::sync::atomic::Ordering::Relaxed);
@@ -130,7 +177,11 @@ async fn collect(
 ) -> BTreeMap<String, Vec<pb::PoseEstimate>> {
     let mut got: BTreeMap<String, Vec<pb::PoseEstimate>> = BTreeMap::new();
     let done = |g: &BTreeMap<String, Vec<pb::PoseEstimate>>| {
-        VEHICLES.iter().all(|v| g.get(*v).and_then(|p| p.last()).is_some_and(|p| p.t_ns >= last_t_ns))
+        VEHICLES.iter().all(|v| {
+            g.get(*v)
+                .and_then(|p| p.last())
+                .is_some_and(|p| p.t_ns >= last_t_ns)
+        })
     };
     let deadline = tokio::time::Instant::now() + timeout;
     while !done(&got) {
@@ -148,7 +199,11 @@ async fn collect(
 
 fn offline_run(config: &uavnav_core::VehicleConfig, events: &[SensorEvent]) -> Vec<PoseOutput> {
     let mut runner = VehicleRunner::new(config.clone(), RunnerParams::default(), None);
-    events.iter().filter_map(|e| runner.push_inline(e.clone()).ok()).flatten().collect()
+    events
+        .iter()
+        .filter_map(|e| runner.push_inline(e.clone()).ok())
+        .flatten()
+        .collect()
 }
 
 struct Row {
@@ -159,7 +214,14 @@ struct Row {
     max_diff_offline: Option<f64>,
 }
 
-fn row(label: &str, outputs: &[PoseOutput], truth: &[TruthSample], from_ns: i64, offline: Option<&BTreeMap<i64, pb::PoseEstimate>>, wire: Option<&[pb::PoseEstimate]>) -> Row {
+fn row(
+    label: &str,
+    outputs: &[PoseOutput],
+    truth: &[TruthSample],
+    from_ns: i64,
+    offline: Option<&BTreeMap<i64, pb::PoseEstimate>>,
+    wire: Option<&[pb::PoseEstimate]>,
+) -> Row {
     let mut se = 0.0;
     let mut n = 0usize;
     for o in outputs.iter().filter(|o| o.t_ns >= from_ns) {
@@ -169,14 +231,22 @@ fn row(label: &str, outputs: &[PoseOutput], truth: &[TruthSample], from_ns: i64,
         }
     }
     let max_diff_offline = match (offline, wire) {
-        (Some(off), Some(w)) => Some(w.iter().map(|p| wire_diff(p, off.get(&p.t_ns))).fold(0.0, f64::max)),
+        (Some(off), Some(w)) => Some(
+            w.iter()
+                .map(|p| wire_diff(p, off.get(&p.t_ns)))
+                .fold(0.0, f64::max),
+        ),
         _ => None,
     };
     Row {
         label: label.to_string(),
         poses: outputs.len(),
         att_rmse_deg: attitude_rmse(outputs, truth, from_ns).map(|v| v.map(f64::to_degrees)),
-        pos_rmse_m: if n > 0 { (se / n as f64).sqrt() } else { f64::NAN },
+        pos_rmse_m: if n > 0 {
+            (se / n as f64).sqrt()
+        } else {
+            f64::NAN
+        },
         max_diff_offline,
     }
 }
@@ -187,7 +257,11 @@ fn wire_diff(a: &pb::PoseEstimate, b: Option<&pb::PoseEstimate>) -> f64 {
     let mut a = a.clone();
     a.vehicle_id.clear();
     a.ingest_wall_ns = 0;
-    if &a == b { 0.0 } else { f64::INFINITY.min(pose_gap(&a, b)) }
+    if &a == b {
+        0.0
+    } else {
+        f64::INFINITY.min(pose_gap(&a, b))
+    }
 }
 
 fn pose_gap(a: &pb::PoseEstimate, b: &pb::PoseEstimate) -> f64 {
@@ -202,26 +276,64 @@ fn pose_gap(a: &pb::PoseEstimate, b: &pb::PoseEstimate) -> f64 {
     }
 }
 
-fn print_table(flight: &Flight, received: &BTreeMap<String, Vec<pb::PoseEstimate>>, offline: &[PoseOutput]) {
+fn print_table(
+    flight: &Flight,
+    received: &BTreeMap<String, Vec<pb::PoseEstimate>>,
+    offline: &[PoseOutput],
+) {
     let frame = LocalFrame::new(flight.origin());
     let truth = flight.truth();
     let from_ns = truth.first().map_or(0, |t| t.t_ns) + 5_000_000_000;
-    let in_frame = |p: &PoseOutput| PoseOutput { pos_ned_m: frame.lla_to_ned(&p.lla), ..*p };
+    let in_frame = |p: &PoseOutput| PoseOutput {
+        pos_ned_m: frame.lla_to_ned(&p.lla),
+        ..*p
+    };
     let offline_out: Vec<PoseOutput> = offline.iter().map(in_frame).collect();
-    let offline_wire: BTreeMap<i64, pb::PoseEstimate> = offline.iter().map(|p| (p.t_ns, pose_to_wire(p))).collect();
-    let mut rows = vec![row("offline (uavnav estimate)", &offline_out, truth, from_ns, None, None)];
+    let offline_wire: BTreeMap<i64, pb::PoseEstimate> =
+        offline.iter().map(|p| (p.t_ns, pose_to_wire(p))).collect();
+    let mut rows = vec![row(
+        "offline (uavnav estimate)",
+        &offline_out,
+        truth,
+        from_ns,
+        None,
+        None,
+    )];
     for v in VEHICLES {
         let wire = received.get(v).map(Vec::as_slice).unwrap_or(&[]);
-        let outs: Vec<PoseOutput> = wire.iter().filter_map(|p| posefmt::to_output(p, Some(&frame))).collect();
+        let outs: Vec<PoseOutput> = wire
+            .iter()
+            .filter_map(|p| posefmt::to_output(p, Some(&frame)))
+            .collect();
         let transport = if v.ends_with("grpc") { "gRPC" } else { "Zenoh" };
-        rows.push(row(&format!("{v} via {transport}"), &outs, truth, from_ns, Some(&offline_wire), Some(wire)));
+        rows.push(row(
+            &format!("{v} via {transport}"),
+            &outs,
+            truth,
+            from_ns,
+            Some(&offline_wire),
+            Some(wire),
+        ));
     }
     println!("Accuracy against the simulator's truth (after the first 5 s; eskf, IMU+GNSS+video):");
-    println!("| run | poses | roll RMSE ° | pitch RMSE ° | yaw RMSE ° | position RMSE m | max diff vs offline |");
+    println!(
+        "| run | poses | roll RMSE ° | pitch RMSE ° | yaw RMSE ° | position RMSE m | max diff vs offline |"
+    );
     println!("|---|---|---|---|---|---|---|");
     for r in rows {
-        let (ro, pi, ya) = r.att_rmse_deg.map_or((f64::NAN, f64::NAN, f64::NAN), |v| (v.x, v.y, v.z));
-        let diff = r.max_diff_offline.map_or("–".to_string(), |d| if d == 0.0 { "0 (identical)".into() } else { format!("{d:.3e}") });
-        println!("| {} | {} | {ro:.3} | {pi:.3} | {ya:.3} | {:.2} | {diff} |", r.label, r.poses, r.pos_rmse_m);
+        let (ro, pi, ya) = r
+            .att_rmse_deg
+            .map_or((f64::NAN, f64::NAN, f64::NAN), |v| (v.x, v.y, v.z));
+        let diff = r.max_diff_offline.map_or("–".to_string(), |d| {
+            if d == 0.0 {
+                "0 (identical)".into()
+            } else {
+                format!("{d:.3e}")
+            }
+        });
+        println!(
+            "| {} | {} | {ro:.3} | {pi:.3} | {ya:.3} | {:.2} | {diff} |",
+            r.label, r.poses, r.pos_rmse_m
+        );
     }
 }

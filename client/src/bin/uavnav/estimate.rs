@@ -64,12 +64,19 @@ pub fn run_dataset(
     let ds = uavnav_dataset::Dataset::open(path).map_err(CliError::input)?;
     let mut config = ds.config().clone();
     config.profile = profile;
-    let params = RunnerParams { use_vision, use_gnss, ..RunnerParams::default() };
+    let params = RunnerParams {
+        use_vision,
+        use_gnss,
+        ..RunnerParams::default()
+    };
     // The local frame is fixed at the first GNSS fix, exactly as in the service, so that the same
     // input gives the same poses offline and online; the report maps poses into the truth frame.
     let mut runner = VehicleRunner::new(config, params, None);
     let truth = ds.truth().map(|t| t.to_vec());
-    let mut out = RunOutput { origin: ds.origin(), ..RunOutput::default() };
+    let mut out = RunOutput {
+        origin: ds.origin(),
+        ..RunOutput::default()
+    };
     for ev in ds.events().map_err(CliError::input)? {
         let ev = ev.map_err(CliError::input)?;
         if let SensorEvent::Gnss(g) = &ev {
@@ -109,13 +116,19 @@ pub fn run(args: Args) -> CliResult {
         None => None,
     };
     let started = std::time::Instant::now();
-    let (out, truth) = run_dataset(&args.dataset, args.profile, !args.no_vision, !args.no_gnss, |p| {
-        writeln!(csv, "{}", csv_row(p))?;
-        if let Some(t) = tum.as_mut() {
-            writeln!(t, "{}", tum_line(p))?;
-        }
-        Ok(())
-    })?;
+    let (out, truth) = run_dataset(
+        &args.dataset,
+        args.profile,
+        !args.no_vision,
+        !args.no_gnss,
+        |p| {
+            writeln!(csv, "{}", csv_row(p))?;
+            if let Some(t) = tum.as_mut() {
+                writeln!(t, "{}", tum_line(p))?;
+            }
+            Ok(())
+        },
+    )?;
     csv.flush().map_err(CliError::runtime)?;
     if let Some(t) = tum.as_mut() {
         t.flush().map_err(CliError::runtime)?;

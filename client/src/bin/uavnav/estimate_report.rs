@@ -6,8 +6,8 @@
 use std::path::Path;
 
 use uavnav_core::{LocalFrame, TruthSample};
+use uavnav_report::{DEFAULT_MIN_GAP_NS, Run, gnss_outages, write_report};
 use uavnav_runner::PoseOutput;
-use uavnav_report::{Run, gnss_outages, write_report, DEFAULT_MIN_GAP_NS};
 
 use crate::common::{CliError, CliResult};
 use crate::estimate::{Args, RunOutput, run_dataset};
@@ -25,10 +25,15 @@ fn label(args: &Args, vision: bool) -> String {
 /// The poses with their NED position re-expressed in the truth's local frame (the estimator's
 /// frame starts at the first GNSS fix; the truth's at the dataset origin).
 fn in_truth_frame(poses: &[PoseOutput], frame: Option<&LocalFrame>) -> Vec<PoseOutput> {
-    let Some(frame) = frame else { return poses.to_vec() };
+    let Some(frame) = frame else {
+        return poses.to_vec();
+    };
     poses
         .iter()
-        .map(|p| PoseOutput { pos_ned_m: frame.lla_to_ned(&p.lla), ..*p })
+        .map(|p| PoseOutput {
+            pos_ned_m: frame.lla_to_ned(&p.lla),
+            ..*p
+        })
         .collect()
 }
 
@@ -37,18 +42,37 @@ pub fn write(dir: &Path, args: &Args, out: &RunOutput, truth: &[TruthSample]) ->
     let outages = gnss_outages(&out.gnss_t_ns, DEFAULT_MIN_GAP_NS);
     let frame = out.origin.map(LocalFrame::new);
     let main = in_truth_frame(&out.poses, frame.as_ref());
-    let mut runs = vec![Run { label: label(args, !args.no_vision), outputs: &main }];
+    let mut runs = vec![Run {
+        label: label(args, !args.no_vision),
+        outputs: &main,
+    }];
     let comparison;
     if !args.no_vision {
-        let (c, _) = run_dataset(&args.dataset, args.profile, false, !args.no_gnss, |_| Ok(()))?;
+        let (c, _) = run_dataset(
+            &args.dataset,
+            args.profile,
+            false,
+            !args.no_gnss,
+            |_| Ok(()),
+        )?;
         comparison = in_truth_frame(&c.poses, frame.as_ref());
-        runs.push(Run { label: label(args, false), outputs: &comparison });
+        runs.push(Run {
+            label: label(args, false),
+            outputs: &comparison,
+        });
     }
     let summary = write_report(dir, &runs, truth, &outages).map_err(CliError::runtime)?;
-    println!("{}", uavnav_estimator::accuracy::AccuracyReport::markdown_header());
+    println!(
+        "{}",
+        uavnav_estimator::accuracy::AccuracyReport::markdown_header()
+    );
     for r in &summary.reports {
         println!("{}", r.markdown_row());
     }
-    eprintln!("uavnav: report written to {} ({} files)", dir.display(), summary.files.len());
+    eprintln!(
+        "uavnav: report written to {} ({} files)",
+        dir.display(),
+        summary.files.len()
+    );
     Ok(())
 }

@@ -6,7 +6,7 @@ use anyhow::Context;
 use uavnav_core::SensorEvent;
 use uavnav_sim::{Flight, Scenario};
 
-use crate::common::{progress, CliError, CliResult};
+use crate::common::{CliError, CliResult, progress};
 
 /// Arguments of `uavnav simulate`.
 #[derive(Debug, clap::Args)]
@@ -45,9 +45,15 @@ pub fn run(args: Args) -> CliResult {
     if args.quiet {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
-    let mut sink = crate::convert::Sink::create(&args.out, &args.vehicle_id, &flight.vehicle_config(), Some(flight.origin()))?;
+    let mut sink = crate::convert::Sink::create(
+        &args.out,
+        &args.vehicle_id,
+        &flight.vehicle_config(),
+        Some(flight.origin()),
+    )?;
     for ev in flight.events() {
-        let ev: SensorEvent = ev.map_err(|e| CliError::runtime(anyhow::anyhow!("simulation failed: {e}")))?;
+        let ev: SensorEvent =
+            ev.map_err(|e| CliError::runtime(anyhow::anyhow!("simulation failed: {e}")))?;
         sink.write_event(&ev)?;
         bar.inc(1);
     }

@@ -9,7 +9,9 @@ use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use uavnav_core::{MotionPrior, SensorEvent, TruthSample};
 use uavnav_estimator::accuracy::truth_at;
 use uavnav_estimator::{Estimator, EstimatorParams};
-use uavnav_vision::{FrontEnd, Method, PairError, VisionParams, csv_row, error_stats, pair_error, CSV_HEADER};
+use uavnav_vision::{
+    CSV_HEADER, FrontEnd, Method, PairError, VisionParams, csv_row, error_stats, pair_error,
+};
 
 use crate::common::{CliError, CliResult};
 
@@ -39,7 +41,10 @@ pub fn run(args: Args) -> CliResult {
     let ds = uavnav_dataset::Dataset::open(&args.dataset).map_err(CliError::input)?;
     let config = ds.config().clone();
     let Some(camera) = config.camera.clone() else {
-        return Err(CliError::input(anyhow::anyhow!("{} has no camera (mav0/cam0)", args.dataset.display())));
+        return Err(CliError::input(anyhow::anyhow!(
+            "{} has no camera (mav0/cam0)",
+            args.dataset.display()
+        )));
     };
     let mut params = VisionParams::default();
     params.imu_aid = !args.no_imu_aid;
@@ -77,7 +82,9 @@ pub fn run(args: Args) -> CliResult {
                 if let Ok(ego) = &r.outcome {
                     measured += 1;
                     if let Some(truth) = &truth {
-                        if let Some((rt, tt)) = true_motion(truth, &camera.body_from_cam, t0, r.t1_ns) {
+                        if let Some((rt, tt)) =
+                            true_motion(truth, &camera.body_from_cam, t0, r.t1_ns)
+                        {
                             errors.push(pair_error(ego, &rt, &tt));
                         }
                     }
@@ -86,7 +93,10 @@ pub fn run(args: Args) -> CliResult {
         }
     }
     out.flush().map_err(CliError::runtime)?;
-    println!("pairs: {pairs}, measured: {measured}, written to {}", args.out.display());
+    println!(
+        "pairs: {pairs}, measured: {measured}, written to {}",
+        args.out.display()
+    );
     if !errors.is_empty() {
         let s = error_stats(&errors);
         println!(
