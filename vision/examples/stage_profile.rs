@@ -1,111 +1,92 @@
-//! Rough timing of the tracking sub-stages on synthetic 640×480 frames (developer aid).
+//! Per-stage timings of [`FrontEnd::process`] on the benchmark's frames (developer aid; the
+//! criterion benchmark `benches/frame.rs` is the reference figure).
+//!
+//! `nice -n 10 cargo run --release -p uavnav-vision --example stage_profile -- [FRAMES] [essential]`
+//!
+//! Prints the median of each stage (wall clock, µs) and the mean CPU time of this thread per
+//! frame (from `/proc/thread-self/schedstat`, Linux; less sensitive to other load on the machine
+//! than the wall clock). Under `valgrind --tool=callgrind` with few frames it gives instruction
+//! counts per function.
+
+#[path = "../benches/common/mod.rs"]
+mod common;
 
 use std::time::Instant;
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use uavnav_core::{CameraModel, Distortion};
-use uavnav_vision::klt::{KltParams, KltScratch, best_corner_in, track_point};
-use uavnav_vision::pyramid::{Pyramid, frame_stats};
-use uavnav_vision::synthetic::{Texture, render_ground};
+use common::{camera, schedule, sequence};
+use nalgebra::Isometry3;
+use uavnav_core::ImageFormat;
+use uavnav_vision::{FrontEnd, Method, SolveParams, VisionParams};
+
+/// CPU time this thread has run, ns (`None` off Linux).
+fn thread_cpu_ns() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    s.split_whitespace().next()?.parse().ok()
+}
+
+fn median(mut v: Vec<u64>) -> u64 {
+    v.sort_unstable();
+    v.get(v.len() / 2).copied().unwrap_or(0)
+}
 
 fn main() {
-    let cam = CameraModel {
-        width: 640,
-        height: 480,
-        fx: 500.0,
-        fy: 500.0,
-        cx: 319.5,
-        cy: 239.5,
-        distortion: Distortion::RadTan {
-            k1: -0.1,
-            k2: 0.02,
-            p1: 0.0002,
-            p2: -0.0001,
+    let mut args = std::env::args().skip(1);
+    let frames: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(600);
+    let method = match args.next().as_deref() {
+        Some("essential") => Method::Essential,
+        _ => Method::Auto,
+    };
+    let seq = sequence(12);
+    let sched = schedule(&seq);
+    let params = VisionParams {
+        solve: SolveParams {
+            method,
+            ..SolveParams::default()
         },
+        ..VisionParams::default()
     };
-    let base = UnitQuaternion::from_basis_unchecked(&[Vector3::y(), -Vector3::x(), Vector3::z()]);
-    let pose = |k: f64| {
-        Isometry3::from_parts(
-            Translation3::new(3.0 * k, 0.5 * k, -150.0),
-            UnitQuaternion::from_euler_angles(0.0, 0.0, 0.2) * base,
-        )
+    let mut fe = FrontEnd::new(&camera(), Isometry3::identity(), params);
+    let origin = Instant::now();
+    fe.set_clock(Box::new(move || origin.elapsed().as_micros() as u64));
+    let mut rows: Vec<[u64; 7]> = Vec::with_capacity(frames);
+    let (mut ok, mut tracked) = (0usize, 0usize);
+    let cpu0 = thread_cpu_ns();
+    let wall0 = Instant::now();
+    for i in 0..frames {
+        let (k, p) = &sched[i % sched.len()];
+        let r = fe.process(i as i64, ImageFormat::Jpeg, &seq.jpegs[*k], p);
+        let t = r.timings;
+        rows.push([
+            t.decode_us,
+            t.track_us,
+            t.solve_us,
+            t.pyramid_us,
+            t.klt_us,
+            t.detect_us,
+            t.decode_us + t.track_us + t.solve_us,
+        ]);
+        ok += usize::from(r.outcome.is_ok());
+        tracked += r.tracked as usize;
+    }
+    let wall_us = wall0.elapsed().as_secs_f64() * 1e6 / frames as f64;
+    let cpu_us = match (cpu0, thread_cpu_ns()) {
+        (Some(a), Some(b)) => format!("{:.0}", (b - a) as f64 / 1e3 / frames as f64),
+        _ => "n/a".into(),
     };
-    let tex = Texture::new(21);
-    let a = render_ground(&tex, &cam, &pose(0.0), 1.5);
-    let b = render_ground(&tex, &cam, &pose(1.0), 1.5);
-    let (mut pa, mut pb) = (Pyramid::default(), Pyramid::default());
-    let n = 200;
-    let t = Instant::now();
-    for _ in 0..n {
-        pa.build(&a, 640, 480, 3);
-    }
+    let med = |j: usize| median(rows.iter().map(|r| r[j]).collect());
     println!(
-        "pyramid build: {:.1} µs",
-        t.elapsed().as_secs_f64() * 1e6 / n as f64
+        "{frames} frames ({method:?}), {ok} measurements, mean tracked {:.0}",
+        tracked as f64 / frames as f64
     );
-    pb.build(&b, 640, 480, 3);
-    let t = Instant::now();
-    for _ in 0..n {
-        std::hint::black_box(frame_stats(&pa));
-    }
     println!(
-        "frame stats: {:.1} µs",
-        t.elapsed().as_secs_f64() * 1e6 / n as f64
+        "median µs: decode {}  track {} (pyramid+checks {}, klt {}, detect {})  solve {}  total {}",
+        med(0),
+        med(1),
+        med(3),
+        med(4),
+        med(5),
+        med(2),
+        med(6)
     );
-    let t = Instant::now();
-    let mut pts = Vec::new();
-    for _ in 0..20 {
-        pts.clear();
-        for cy in 0..14 {
-            for cx in 0..18 {
-                let r = (
-                    (cx * 35) >> 1,
-                    ((cx + 1) * 35) >> 1,
-                    (cy * 35) >> 1,
-                    ((cy + 1) * 35) >> 1,
-                );
-                if let Some((p, _)) = best_corner_in(&pa.levels[1], r, 2, 20.0) {
-                    pts.push([p[0] * 2.0, p[1] * 2.0]);
-                }
-            }
-        }
-    }
-    println!(
-        "corners (all 252 cells): {:.1} µs, {} found",
-        t.elapsed().as_secs_f64() * 1e6 / 20.0,
-        pts.len()
-    );
-    let params = KltParams::default();
-    let mut s = KltScratch::default();
-    let t = Instant::now();
-    let mut ok = 0;
-    for _ in 0..20 {
-        ok = 0;
-        for p in &pts {
-            let g = [p[0] - 10.0, p[1] + 3.0];
-            if let Some(q) = track_point(&pa, &pb, *p, g, None, 1, &params, &mut s)
-                && track_point(&pb, &pa, q, *p, None, 1, &params, &mut s).is_some()
-            {
-                ok += 1;
-            }
-        }
-    }
-    println!(
-        "KLT fwd+bwd, 2 levels, {} pts: {:.1} µs ({ok} ok)",
-        pts.len(),
-        t.elapsed().as_secs_f64() * 1e6 / 20.0
-    );
-    let t = Instant::now();
-    for _ in 0..20 {
-        for p in &pts {
-            std::hint::black_box(
-                cam.pixel_to_normalized(&nalgebra::Point2::new(f64::from(p[0]), f64::from(p[1]))),
-            );
-        }
-    }
-    println!(
-        "undistort {} pts: {:.1} µs",
-        pts.len(),
-        t.elapsed().as_secs_f64() * 1e6 / 20.0
-    );
+    println!("mean per frame: wall {wall_us:.0} µs, thread CPU {cpu_us} µs");
 }

@@ -8,15 +8,9 @@ use uavnav_core::{CameraModel, Egomotion, ImageFormat, MotionPrior};
 
 use crate::decode::{DecodeError, LumaDecoder};
 use crate::essential::to_quat;
-use crate::klt::{Affine, KltParams, KltScratch, best_corner_in, track_point};
+use crate::klt::{Affine, KltParams, KltScratch, best_corner_in, invert2, track_point};
 use crate::pyramid::{Pyramid, frame_stats};
 use crate::solve::{SolveParams, SolveScratch, solve};
-
-/// Inverse of a 2×2 row-major matrix.
-fn invert2(a: [f32; 4]) -> Option<[f32; 4]> {
-    let det = a[0] * a[3] - a[1] * a[2];
-    (det.abs() > 1e-6).then(|| [a[3] / det, -a[1] / det, -a[2] / det, a[0] / det])
-}
 
 /// Why a frame pair gave no egomotion.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -176,10 +170,16 @@ impl Default for VisionParams {
 pub struct StageTimings {
     /// Decode.
     pub decode_us: u64,
-    /// Pyramid, checks, tracking and feature replenishment.
+    /// Pyramid, checks, tracking and feature replenishment (the sum of the three below).
     pub track_us: u64,
     /// Egomotion solver.
     pub solve_us: u64,
+    /// Part of `track_us`: pyramid and frame checks.
+    pub pyramid_us: u64,
+    /// Part of `track_us`: IMU-aided KLT with the forward–backward check.
+    pub klt_us: u64,
+    /// Part of `track_us`: keeping tracks and detecting corners in empty cells.
+    pub detect_us: u64,
 }
 
 /// Output for one incoming frame.
@@ -344,21 +344,27 @@ impl FrontEnd {
         let luma = self.decoder.decode_buffer();
         self.cur
             .build(luma, w, h, self.params.pyramid_levels.max(2));
-        if let Some(reject) = self.check_frame() {
+        let reject = self.check_frame();
+        let t_pyramid = (self.clock)();
+        res.timings.pyramid_us = t_pyramid.saturating_sub(t_decoded);
+        if let Some(reject) = reject {
             self.reset();
             res.outcome = Err(reject);
-            res.timings.track_us = (self.clock)().saturating_sub(t_decoded);
+            res.timings.track_us = res.timings.pyramid_us;
             return res;
         }
         if t0_ns.is_none() {
             self.replenish();
             self.finish_frame(t_ns);
-            res.timings.track_us = (self.clock)().saturating_sub(t_decoded);
+            let t_end = (self.clock)();
+            res.timings.detect_us = t_end.saturating_sub(t_pyramid);
+            res.timings.track_us = t_end.saturating_sub(t_decoded);
             return res;
         }
         self.track(prior);
         res.tracked = self.m_x0.len() as u32;
         let t_tracked = (self.clock)();
+        res.timings.klt_us = t_tracked.saturating_sub(t_pyramid);
         res.outcome = if self.m_x0.len() < self.params.min_tracks {
             Err(NoMeasurement::TooFewTracks {
                 tracked: res.tracked,
@@ -395,8 +401,8 @@ impl FrontEnd {
         self.keep_tracks(res.outcome.is_ok());
         self.replenish();
         self.finish_frame(t_ns);
-        res.timings.track_us =
-            (self.clock)().saturating_sub(t_solved) + t_tracked.saturating_sub(t_decoded);
+        res.timings.detect_us = (self.clock)().saturating_sub(t_solved);
+        res.timings.track_us = res.timings.detect_us + t_tracked.saturating_sub(t_decoded);
         res
     }
 

@@ -28,27 +28,58 @@ impl Default for KltParams {
     }
 }
 
-/// Scratch buffers for one tracker (allocated once).
-#[derive(Debug, Default)]
+/// Largest padded window (rows of `2R+1` samples padded to whole groups of four, R ≤ 10).
+const MAX_WIN: usize = 24 * 21;
+/// Largest template with its one-pixel gradient border.
+const MAX_EXT: usize = 26 * 23;
+
+/// Scratch buffers for one tracker (allocated once, reused for every feature). Fixed-size
+/// arrays: with the window size a compile-time constant in the kernels, every loop has a fixed
+/// length and no bounds checks, so the compiler unrolls and vectorizes them.
+#[derive(Debug)]
 pub struct KltScratch {
-    template: Vec<f32>,
-    gx: Vec<f32>,
-    gy: Vec<f32>,
-    patch: Vec<f32>,
+    /// Template samples with a one-pixel border for the gradients.
+    ext: Box<[f32; MAX_EXT]>,
+    /// Template values and gradients, rows padded to whole groups of four (pad lanes zero).
+    tv: Box<[f32; MAX_WIN]>,
+    gx: Box<[f32; MAX_WIN]>,
+    gy: Box<[f32; MAX_WIN]>,
+    /// The sampled window of `next`.
+    win: Box<[f32; MAX_WIN]>,
+    /// 1 in the window's lanes, 0 in the pads, for the half window `mask_r` (0: not yet set).
+    mask: Box<[f32; MAX_WIN]>,
+    mask_r: usize,
+}
+
+impl Default for KltScratch {
+    fn default() -> Self {
+        Self {
+            ext: Box::new([0.0; MAX_EXT]),
+            tv: Box::new([0.0; MAX_WIN]),
+            gx: Box::new([0.0; MAX_WIN]),
+            gy: Box::new([0.0; MAX_WIN]),
+            win: Box::new([0.0; MAX_WIN]),
+            mask: Box::new([0.0; MAX_WIN]),
+            mask_r: 0,
+        }
+    }
 }
 
 /// Local affine map of the predicted motion: a window offset `x` in `prev` appears at `A x`
 /// in `next` (row-major `[a00, a01, a10, a11]`). `None` = identity (fast path).
 pub type Affine = Option<[f32; 4]>;
 
-/// Tracks a point from `prev` into `next`.
-///
-/// With `affine`, the window in `next` is sampled on the predicted warped grid, so large
-/// predicted rotations (IMU aid) do not break the translation-only window model.
-///
-/// `p0` is the point in `prev` (level-0 px), `guess` its predicted position in `next`; the
-/// search starts at `top_level` (≤ pyramid depth − 1) from the guess. Returns the tracked
-/// position or `None` (left the image, flat window, or singular system).
+/// A tracked point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Track {
+    /// Position in `next`, level-0 px.
+    pub pos: [f32; 2],
+    /// Whether the finest level converged (last update below `epsilon_px`) within
+    /// `max_iterations`.
+    pub converged: bool,
+}
+
+/// Tracks a point from `prev` into `next`; the position only, see [`track`].
 #[allow(clippy::too_many_arguments)] // the tracker's inputs are all distinct
 pub fn track_point(
     prev: &Pyramid,
@@ -60,22 +91,51 @@ pub fn track_point(
     params: &KltParams,
     s: &mut KltScratch,
 ) -> Option<[f32; 2]> {
-    let top = top_level.min(prev.levels.len().min(next.levels.len()) - 1);
+    track(prev, next, p0, guess, affine, top_level, params, s).map(|t| t.pos)
+}
+
+/// Tracks a point from `prev` into `next`.
+///
+/// With `affine`, the template is sampled from `prev` on the grid `p + A⁻¹ x` (once per level),
+/// so large predicted rotations (IMU aid) do not break the translation-only window model while
+/// the iterations sample `next` on an axis-aligned grid (the fast path).
+///
+/// `p0` is the point in `prev` (level-0 px), `guess` its predicted position in `next`; the
+/// search starts at `top_level` (≤ pyramid depth − 1) from the guess. Returns `None` when the
+/// point left the image, the window is flat, or the system is singular.
+#[allow(clippy::too_many_arguments)] // the tracker's inputs are all distinct
+pub fn track(
+    prev: &Pyramid,
+    next: &Pyramid,
+    p0: [f32; 2],
+    guess: [f32; 2],
+    affine: Affine,
+    top_level: usize,
+    params: &KltParams,
+    s: &mut KltScratch,
+) -> Option<Track> {
+    let depth = prev.levels.len().min(next.levels.len());
+    if depth == 0 {
+        return None;
+    }
+    // the template is warped by the inverse map; a degenerate prediction is not usable
+    let warp = match affine {
+        Some(a) => Some(invert2(a)?),
+        None => None,
+    };
+    let top = top_level.min(depth - 1);
     let scale = 1.0 / (1u32 << top) as f32;
     let mut flow = [(guess[0] - p0[0]) * scale, (guess[1] - p0[1]) * scale];
+    let mut converged = false;
     for level in (0..=top).rev() {
         let sc = 1.0 / (1u32 << level) as f32;
         let pl = [p0[0] * sc, p0[1] * sc];
-        match track_level(
-            &prev.levels[level],
-            &next.levels[level],
-            pl,
-            flow,
-            affine,
-            params,
-            s,
-        ) {
-            Some(f) => flow = f,
+        let lv = (&prev.levels[level], &next.levels[level]);
+        match track_level(lv.0, lv.1, pl, flow, warp, params, s) {
+            Some((f, c)) => {
+                flow = f;
+                converged = c;
+            }
             // Coarse levels may clip at the border: keep the guess and refine finer.
             None if level > 0 => {}
             None => return None,
@@ -84,128 +144,303 @@ pub fn track_point(
             flow = [flow[0] * 2.0, flow[1] * 2.0];
         }
     }
-    Some([p0[0] + flow[0], p0[1] + flow[1]])
+    Some(Track {
+        pos: [p0[0] + flow[0], p0[1] + flow[1]],
+        converged,
+    })
 }
 
-/// One level of Lucas–Kanade: finds `flow` with `next(p + flow + x) ≈ prev(p + x)` over the
-/// window, linearized with the template gradient (so the 2×2 system is built once).
+/// Inverse of a 2×2 row-major matrix; `None` when (nearly) singular or not finite.
+pub fn invert2(a: [f32; 4]) -> Option<[f32; 4]> {
+    let det = a[0] * a[3] - a[1] * a[2];
+    (det.abs() > 1e-6 && det.is_finite())
+        .then(|| [a[3] / det, -a[1] / det, -a[2] / det, a[0] / det])
+}
+
+/// Lane-wise sums over four lanes: `f32` reductions written this way vectorize (SSE2/NEON)
+/// without `unsafe` or fast-math; the order of the additions is fixed, so results are
+/// deterministic.
+type F4 = [f32; 4];
+
+#[inline(always)]
+fn hsum(a: F4) -> f32 {
+    (a[0] + a[2]) + (a[1] + a[3])
+}
+
+/// `Σ a·b` over slices whose length is a multiple of four, four lanes at a time (one sum per
+/// loop: several accumulators in one loop defeat the vectorizer).
+#[inline(always)]
+fn dot4(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc: F4 = [0.0; 4];
+    for (x, y) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
+        for k in 0..4 {
+            acc[k] += x[k] * y[k];
+        }
+    }
+    hsum(acc)
+}
+
+/// Dispatches one pyramid level to the kernel specialised for the window size (fixed loop
+/// lengths let the compiler unroll and vectorize the rows). Half windows above 10 use 10.
 fn track_level(
     prev: &GrayF32,
     next: &GrayF32,
     p: [f32; 2],
-    mut flow: [f32; 2],
-    affine: Affine,
+    flow: [f32; 2],
+    warp: Option<[f32; 4]>,
     params: &KltParams,
     s: &mut KltScratch,
-) -> Option<[f32; 2]> {
-    let r = params.half_window;
-    let side = 2 * r + 1;
-    let n = side * side;
-    if !prev.window_inside(p[0], p[1], r) {
-        return None;
+) -> Option<([f32; 2], bool)> {
+    // (R, chunks of four lanes per row of 2R+1 samples)
+    match params.half_window {
+        0 | 1 => level_kernel::<1, 1>(prev, next, p, flow, warp, params, s),
+        2 => level_kernel::<2, 2>(prev, next, p, flow, warp, params, s),
+        3 => level_kernel::<3, 2>(prev, next, p, flow, warp, params, s),
+        4 => level_kernel::<4, 3>(prev, next, p, flow, warp, params, s),
+        5 => level_kernel::<5, 3>(prev, next, p, flow, warp, params, s),
+        6 => level_kernel::<6, 4>(prev, next, p, flow, warp, params, s),
+        7 => level_kernel::<7, 4>(prev, next, p, flow, warp, params, s),
+        8 => level_kernel::<8, 5>(prev, next, p, flow, warp, params, s),
+        9 => level_kernel::<9, 5>(prev, next, p, flow, warp, params, s),
+        _ => level_kernel::<10, 6>(prev, next, p, flow, warp, params, s),
     }
-    let ext = side + 2;
-    s.template.resize(ext * ext, 0.0);
-    s.gx.resize(n, 0.0);
-    s.gy.resize(n, 0.0);
-    s.patch.resize(n, 0.0);
-    prev.sample_patch(
-        p[0] - r as f32 - 1.0,
-        p[1] - r as f32 - 1.0,
-        ext,
-        &mut s.template,
-    );
-    let (mut gxx, mut gxy, mut gyy, mut tsum) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
-    for y in 0..side {
-        for x in 0..side {
-            let c = (y + 1) * ext + x + 1;
-            let gx = 0.5 * (s.template[c + 1] - s.template[c - 1]);
-            let gy = 0.5 * (s.template[c + ext] - s.template[c - ext]);
-            let i = y * side + x;
-            s.gx[i] = gx;
-            s.gy[i] = gy;
-            gxx += gx * gx;
-            gxy += gx * gy;
-            gyy += gy * gy;
-            tsum += s.template[c];
-        }
-    }
-    let nf = n as f32;
-    let det = gxx * gyy - gxy * gxy;
-    let tr = gxx + gyy;
-    let min_eig = 0.5 * (tr - ((gxx - gyy).powi(2) + 4.0 * gxy * gxy).sqrt()) / nf;
-    if min_eig < params.min_eigen || det <= 0.0 {
-        return None;
-    }
-    let tmean = tsum / nf;
-    // Keep the centred template row-compact in `patch`'s companion: reuse the first n entries.
-    for y in 0..side {
-        for x in 0..side {
-            s.template[y * side + x] = s.template[(y + 1) * ext + x + 1] - tmean;
-        }
-    }
-    let inv = 1.0 / det;
-    for _ in 0..params.max_iterations {
-        let (qx, qy) = (p[0] + flow[0], p[1] + flow[1]);
-        match affine {
-            None => {
-                if !next.window_inside(qx, qy, r) {
-                    return None;
-                }
-                next.sample_patch(qx - r as f32, qy - r as f32, side, &mut s.patch);
-            }
-            Some(a) => {
-                let reach = (a[0].abs() + a[1].abs()).max(a[2].abs() + a[3].abs());
-                if !next.window_inside(qx, qy, (r as f32 * reach).ceil() as usize) {
-                    return None;
-                }
-                sample_warped(next, [qx, qy], &a, r, &mut s.patch);
-            }
-        }
-        let jmean = s.patch[..n].iter().sum::<f32>() / nf;
-        let (mut bx, mut by) = (0.0f32, 0.0f32);
-        for (((t, j), gx), gy) in s.template[..n]
-            .iter()
-            .zip(&s.patch[..n])
-            .zip(&s.gx[..n])
-            .zip(&s.gy[..n])
-        {
-            let e = t - (j - jmean);
-            bx += e * gx;
-            by += e * gy;
-        }
-        // the update is in template coordinates; in `next` it is A·δ
-        let (ux, uy) = (inv * (gyy * bx - gxy * by), inv * (gxx * by - gxy * bx));
-        let (dx, dy) = match affine {
-            None => (ux, uy),
-            Some(a) => (a[0] * ux + a[1] * uy, a[2] * ux + a[3] * uy),
-        };
-        flow[0] += dx;
-        flow[1] += dy;
-        if dx * dx + dy * dy < params.epsilon_px * params.epsilon_px {
-            break;
-        }
-    }
-    Some(flow)
 }
 
-/// Samples the window `q + A x`, `x ∈ [−r, r]²`, by per-pixel bilinear interpolation.
-fn sample_warped(img: &GrayF32, q: [f32; 2], a: &[f32; 4], r: usize, out: &mut [f32]) {
-    let side = 2 * r + 1;
+/// The template of one level: its structure tensor and the constant parts of the right-hand
+/// side (see [`level_kernel`]).
+struct Template {
+    gxx: f32,
+    gxy: f32,
+    gyy: f32,
+    /// Σ t̃·∇T, t̃ the centred template.
+    tg: [f32; 2],
+    /// Σ ∇T.
+    sg: [f32; 2],
+    /// Template mean (subtracted from the samples of `next` to keep the sums small).
+    mean: f32,
+}
+
+/// Integer origin and sub-pixel fractions of a region whose top-left sample is `(x0, y0)` and
+/// which reads pixels `[xi, xi + cols] × [yi, yi + rows]` (bilinear needs the extra one);
+/// `None` when that is not inside the image (or the position is not finite).
+#[inline]
+fn region(
+    img: &GrayF32,
+    x0: f32,
+    y0: f32,
+    cols: usize,
+    rows: usize,
+) -> Option<(usize, usize, f32, f32)> {
+    if !(x0 >= 0.0 && y0 >= 0.0) {
+        return None;
+    }
+    // non-negative: truncation is the floor
+    let (xi, yi) = (x0 as usize, y0 as usize);
+    (xi + cols < img.width && yi + rows < img.height).then_some((
+        xi,
+        yi,
+        x0 - xi as f32,
+        y0 - yi as f32,
+    ))
+}
+
+/// Bilinear samples of `img` on a `rows × cols` grid with unit spacing starting at the
+/// sub-pixel position `(xi + ax, yi + ay)` (one set of weights for the whole grid), minus
+/// `offset`, into `out` (row-major, `cols` per row). The caller checked the region.
+#[allow(clippy::too_many_arguments)] // a sampling kernel: the grid and the weights
+#[inline(always)]
+fn sample_grid(
+    img: &GrayF32,
+    (xi, yi, ax, ay): (usize, usize, f32, f32),
+    rows: usize,
+    cols: usize,
+    offset: f32,
+    out: &mut [f32],
+) {
+    let (w00, w01) = ((1.0 - ax) * (1.0 - ay), ax * (1.0 - ay));
+    let (w10, w11) = ((1.0 - ax) * ay, ax * ay);
     let w = img.width;
-    for yy in 0..side {
-        let y = yy as f32 - r as f32;
-        for xx in 0..side {
-            let x = xx as f32 - r as f32;
-            let (sx, sy) = (q[0] + a[0] * x + a[1] * y, q[1] + a[2] * x + a[3] * y);
-            let (fx, fy) = (sx.floor(), sy.floor());
-            let (ax, ay) = (sx - fx, sy - fy);
-            let i = fy as usize * w + fx as usize;
-            let d = &img.data;
-            out[yy * side + xx] = (1.0 - ay) * ((1.0 - ax) * d[i] + ax * d[i + 1])
-                + ay * ((1.0 - ax) * d[i + w] + ax * d[i + w + 1]);
+    for y in 0..rows {
+        let base = (yi + y) * w + xi;
+        let r0 = &img.data[base..base + cols + 1];
+        let r1 = &img.data[base + w..base + w + cols + 1];
+        let o = &mut out[y * cols..y * cols + cols];
+        for x in 0..cols {
+            o[x] = w00 * r0[x] + w01 * r0[x + 1] + w10 * r1[x] + w11 * r1[x + 1] - offset;
         }
     }
+}
+
+/// Samples the template of `prev` around `p` into `ext`: `2R+3` rows (a one-pixel border for
+/// the gradients) of `ew` samples (the padded row plus the border), on the grid `p + M x`
+/// when a warp `M` is given.
+#[inline(always)]
+fn sample_template<const R: usize>(
+    prev: &GrayF32,
+    p: [f32; 2],
+    warp: Option<[f32; 4]>,
+    ew: usize,
+    ext: &mut [f32],
+) -> Option<()> {
+    let rows = 2 * R + 3;
+    let h = (R + 1) as f32;
+    match warp {
+        None => {
+            let at = region(prev, p[0] - h, p[1] - h, ew, rows)?;
+            sample_grid(prev, at, rows, ew, 0.0, ext);
+        }
+        Some(m) => sample_warped(prev, p, &m, h, rows, ew, ext)?,
+    }
+    Some(())
+}
+
+/// [`sample_template`] on the warped grid `p + M (x − h, y − h)`, per-pixel bilinear.
+fn sample_warped(
+    prev: &GrayF32,
+    p: [f32; 2],
+    m: &[f32; 4],
+    h: f32,
+    rows: usize,
+    ew: usize,
+    ext: &mut [f32],
+) -> Option<()> {
+    // grid origin (top-left sample) in `prev`; the extreme samples are at the corners, and a
+    // sample at s reads floor(s) + 1 ≤ floor(min) + floor(span) + 2
+    let o = [p[0] - h * (m[0] + m[1]), p[1] - h * (m[2] + m[3])];
+    let (wx, wy) = ((ew - 1) as f32, (rows - 1) as f32);
+    let span = |a: f32, b: f32| {
+        let c = [0.0, a * wx, b * wy, a * wx + b * wy];
+        let lo = c.iter().fold(0.0f32, |u, &v| u.min(v));
+        let hi = c.iter().fold(0.0f32, |u, &v| u.max(v));
+        (lo, hi - lo)
+    };
+    let ((x_lo, x_span), (y_lo, y_span)) = (span(m[0], m[1]), span(m[2], m[3]));
+    region(
+        prev,
+        o[0] + x_lo,
+        o[1] + y_lo,
+        x_span as usize + 2,
+        y_span as usize + 2,
+    )?;
+    let w = prev.width;
+    let d = &prev.data;
+    for (j, row) in ext[..rows * ew].chunks_exact_mut(ew).enumerate() {
+        let y = j as f32;
+        for (i, out) in row.iter_mut().enumerate() {
+            let x = i as f32;
+            let sx = o[0] + m[0] * x + m[1] * y;
+            let sy = o[1] + m[2] * x + m[3] * y;
+            // inside by the check above: non-negative, truncation is the floor
+            let (fx, fy) = (sx as usize, sy as usize);
+            let (ax, ay) = (sx - fx as f32, sy - fy as f32);
+            let k = fy * w + fx;
+            let top = d[k] + ax * (d[k + 1] - d[k]);
+            let bot = d[k + w] + ax * (d[k + w + 1] - d[k + w]);
+            *out = top + ay * (bot - top);
+        }
+    }
+    Some(())
+}
+
+/// Gradients (central differences) and values of the template in `s.ext`, as `2R+1` rows of
+/// `4·NC` lanes (pad lanes zero), and the template's sums. `None` for a flat window (paper
+/// eq. 12 needs an invertible structure tensor).
+#[inline(always)]
+fn prepare_template<const R: usize, const NC: usize>(
+    s: &mut KltScratch,
+    min_eigen: f32,
+) -> Option<Template> {
+    let side = 2 * R + 1;
+    let pw = 4 * NC;
+    let ew = pw + 2;
+    let n = side * pw;
+    if s.mask_r != R {
+        for (i, m) in s.mask[..n].iter_mut().enumerate() {
+            *m = if i % pw < side { 1.0 } else { 0.0 };
+        }
+        s.mask_r = R;
+    }
+    let ext = &s.ext[..(side + 2) * ew];
+    let (tv, gx, gy) = (&mut s.tv[..n], &mut s.gx[..n], &mut s.gy[..n]);
+    for y in 0..side {
+        let up = &ext[y * ew..y * ew + ew];
+        let mid = &ext[(y + 1) * ew..(y + 1) * ew + ew];
+        let dn = &ext[(y + 2) * ew..(y + 2) * ew + ew];
+        let o = y * pw;
+        for x in 0..pw {
+            let m = if x < side { 1.0 } else { 0.0 };
+            tv[o + x] = m * mid[x + 1];
+            gx[o + x] = m * 0.5 * (mid[x + 2] - mid[x]);
+            gy[o + x] = m * 0.5 * (dn[x + 1] - up[x + 1]);
+        }
+    }
+    let (gx, gy, tv, m) = (&*gx, &*gy, &*tv, &s.mask[..n]);
+    let (gxx, gxy, gyy) = (dot4(gx, gx), dot4(gx, gy), dot4(gy, gy));
+    let nf = (side * side) as f32;
+    let det = gxx * gyy - gxy * gxy;
+    let min_eig = 0.5 * (gxx + gyy - ((gxx - gyy).powi(2) + 4.0 * gxy * gxy).sqrt()) / nf;
+    if !(min_eig >= min_eigen && det > 0.0) {
+        return None;
+    }
+    let mean = dot4(tv, m) / nf;
+    let sg = [dot4(gx, m), dot4(gy, m)];
+    // Σ t̃ g = Σ T g − mean Σ g
+    let tg = [dot4(tv, gx) - mean * sg[0], dot4(tv, gy) - mean * sg[1]];
+    Some(Template {
+        gxx,
+        gxy,
+        gyy,
+        tg,
+        sg,
+        mean,
+    })
+}
+
+/// One level of Lucas–Kanade (paper eq. 12): finds `flow` with
+/// `next(p + flow + x) − mean ≈ prev(p + M x) − mean` over the `(2R+1)²` window, linearized
+/// with the template gradient so the 2×2 system is built once. Zero-mean residuals make it
+/// robust to exposure changes. With `e = t̃ − (J − J̄)` the right-hand side
+/// `Σ e ∇T = Σ t̃ ∇T − Σ J ∇T + J̄ Σ ∇T` needs three sums of the sampled window `J` per
+/// iteration. Returns the flow and whether the last update was below `epsilon_px`.
+fn level_kernel<const R: usize, const NC: usize>(
+    prev: &GrayF32,
+    next: &GrayF32,
+    p: [f32; 2],
+    mut flow: [f32; 2],
+    warp: Option<[f32; 4]>,
+    params: &KltParams,
+    s: &mut KltScratch,
+) -> Option<([f32; 2], bool)> {
+    let side = 2 * R + 1;
+    let pw = 4 * NC;
+    debug_assert!(pw >= side && pw < side + 4);
+    let n = side * pw;
+    sample_template::<R>(prev, p, warp, pw + 2, &mut s.ext[..])?;
+    let t = prepare_template::<R, NC>(s, params.min_eigen)?;
+    let inv = 1.0 / (t.gxx * t.gyy - t.gxy * t.gxy);
+    let nf = (side * side) as f32;
+    let (gx, gy, win, mask) = (&s.gx[..n], &s.gy[..n], &mut s.win[..n], &s.mask[..n]);
+    let eps2 = params.epsilon_px * params.epsilon_px;
+    for _ in 0..params.max_iterations {
+        let q = [p[0] + flow[0] - R as f32, p[1] + flow[1] - R as f32];
+        let at = region(next, q[0], q[1], pw, side)?;
+        // samples shifted by the template mean (keeps the sums small)
+        sample_grid(next, at, side, pw, t.mean, win);
+        // the pad lanes carry samples but zero gradients: masked in Σ J only
+        let jmean = dot4(win, mask) / nf;
+        let bx = t.tg[0] - dot4(win, gx) + jmean * t.sg[0];
+        let by = t.tg[1] - dot4(win, gy) + jmean * t.sg[1];
+        let (dx, dy) = (
+            inv * (t.gyy * bx - t.gxy * by),
+            inv * (t.gxx * by - t.gxy * bx),
+        );
+        flow[0] += dx;
+        flow[1] += dy;
+        if dx * dx + dy * dy < eps2 {
+            return Some((flow, true));
+        }
+    }
+    Some((flow, false))
 }
 
 /// Shi–Tomasi score (mean minimum eigenvalue of the 5×5 structure tensor) at an integer pixel.

@@ -40,24 +40,30 @@ impl GrayF32 {
     /// vectorizable loop.
     #[inline]
     pub fn sample_patch(&self, x0: f32, y0: f32, side: usize, out: &mut [f32]) {
-        let xi = x0.floor();
-        let yi = y0.floor();
-        let (ax, ay) = (x0 - xi, y0 - yi);
+        self.sample_patch_rect(x0, y0, side, side, out);
+    }
+
+    /// [`Self::sample_patch`] for a `cols × rows` patch.
+    #[inline]
+    pub fn sample_patch_rect(&self, x0: f32, y0: f32, cols: usize, rows: usize, out: &mut [f32]) {
+        // inside the image, so non-negative: truncation is the floor (and no libm call)
+        let (xi, yi) = (x0 as usize, y0 as usize);
+        let (ax, ay) = (x0 - xi as f32, y0 - yi as f32);
         let (w00, w01, w10, w11) = (
             (1.0 - ax) * (1.0 - ay),
             ax * (1.0 - ay),
             (1.0 - ax) * ay,
             ax * ay,
         );
-        let (xi, yi) = (xi as usize, yi as usize);
         let w = self.width;
-        for (r, dst) in out.chunks_exact_mut(side).take(side).enumerate() {
+        for (r, dst) in out.chunks_exact_mut(cols).take(rows).enumerate() {
             let base = (yi + r) * w + xi;
-            let r0 = &self.data[base..base + side + 1];
-            let r1 = &self.data[base + w..base + w + side + 1];
-            // zipped windows: no bounds checks, vectorizes
-            for ((d, a), b) in dst.iter_mut().zip(r0.windows(2)).zip(r1.windows(2)) {
-                *d = w00 * a[0] + w01 * a[1] + w10 * b[0] + w11 * b[1];
+            let r0 = &self.data[base..base + cols + 1];
+            let r1 = &self.data[base + w..base + w + cols + 1];
+            // zipped shifted slices: no bounds checks, vectorizes
+            let (a0, a1, b0, b1) = (&r0[..cols], &r0[1..], &r1[..cols], &r1[1..]);
+            for ((((d, a0), a1), b0), b1) in dst.iter_mut().zip(a0).zip(a1).zip(b0).zip(b1) {
+                *d = w00 * a0 + w01 * a1 + w10 * b0 + w11 * b1;
             }
         }
     }
