@@ -122,6 +122,9 @@ pub struct VisionParams {
     pub corner_step: usize,
     /// Frames a grid cell without any corner is skipped before it is searched again. Default 4.
     pub empty_cell_cooldown: u8,
+    /// A tracked feature closer than this to an older one is dropped, px. Default 16 (about
+    /// half a grid cell at the default `max_features`).
+    pub min_distance_px: f32,
     /// Minimum tracks for solving. Default 20.
     pub min_tracks: usize,
     /// Mean intensity below which a frame is black. Default 12.
@@ -153,6 +156,7 @@ impl Default for VisionParams {
             min_corner_score: 20.0,
             corner_step: 2,
             empty_cell_cooldown: 4,
+            min_distance_px: 16.0,
             min_tracks: 20,
             black_mean: 12.0,
             saturated_fraction: 0.8,
@@ -218,7 +222,10 @@ pub struct FrontEnd {
     m_x0: Vec<Vector3<f64>>,
     m_x1: Vec<Vector3<f64>>,
     m_px1: Vec<[f32; 2]>,
-    cells: Vec<bool>,
+    /// Per grid cell: the first kept feature in it (`u32::MAX`: none); `next_in_cell` chains
+    /// the others.
+    cell_head: Vec<u32>,
+    next_in_cell: Vec<u32>,
     cooldown: Vec<u8>,
     klt: KltScratch,
     solve_scratch: SolveScratch,
@@ -256,7 +263,8 @@ impl FrontEnd {
             m_x0: Vec::with_capacity(cap),
             m_x1: Vec::with_capacity(cap),
             m_px1: Vec::with_capacity(cap),
-            cells: Vec::new(),
+            cell_head: Vec::new(),
+            next_in_cell: Vec::with_capacity(cap),
             cooldown: Vec::new(),
             klt: KltScratch::default(),
             solve_scratch: SolveScratch::default(),
@@ -598,21 +606,32 @@ impl FrontEnd {
         (cell, w.div_ceil(cell), h.div_ceil(cell))
     }
 
-    /// One feature per grid cell: drops duplicates and detects new corners in empty cells.
+    /// Drops features crowding an older one (closer than `min_distance_px`), then detects new
+    /// corners in the grid cells left without a feature. Tracks are kept across cell borders:
+    /// forcing one feature per cell would, under a uniform image motion, discard and re-detect
+    /// a quarter of the features every frame.
     fn replenish(&mut self) {
         let (cell, gw, gh) = self.grid();
-        self.cells.clear();
-        self.cells.resize(gw * gh, false);
+        self.cell_head.clear();
+        self.cell_head.resize(gw * gh, u32::MAX);
+        self.next_in_cell.clear();
+        let md2 = self.params.min_distance_px * self.params.min_distance_px;
         let mut k = 0;
         for i in 0..self.pts.len() {
-            let [x, y] = self.pts[i];
-            let c = (y as usize / cell).min(gh - 1) * gw + (x as usize / cell).min(gw - 1);
-            if !self.cells[c] {
-                self.cells[c] = true;
-                self.pts[k] = self.pts[i];
-                self.rays[k] = self.rays[i];
-                k += 1;
+            let p = self.pts[i];
+            let (cx, cy) = (
+                (p[0].max(0.0) as usize / cell).min(gw - 1),
+                (p[1].max(0.0) as usize / cell).min(gh - 1),
+            );
+            if self.crowded(p, (cx, cy), gw, gh, md2) {
+                continue;
             }
+            let c = cy * gw + cx;
+            self.pts[k] = p;
+            self.rays[k] = self.rays[i];
+            self.next_in_cell.push(self.cell_head[c]);
+            self.cell_head[c] = k as u32;
+            k += 1;
         }
         self.pts.truncate(k);
         self.rays.truncate(k);
@@ -623,7 +642,7 @@ impl FrontEnd {
         let lvl = usize::from(self.cur.levels.len() > 1);
         let img = &self.cur.levels[lvl];
         for c in 0..gw * gh {
-            if self.cells[c] {
+            if self.cell_head[c] != u32::MAX || self.pts.len() >= gw * gh {
                 continue;
             }
             if self.cooldown[c] > 0 {
@@ -654,6 +673,30 @@ impl FrontEnd {
                 None => self.cooldown[c] = self.params.empty_cell_cooldown,
             }
         }
+    }
+
+    /// Whether a kept feature in the 3×3 cells around `(cx, cy)` is within √`md2` of `p`.
+    fn crowded(
+        &self,
+        p: [f32; 2],
+        (cx, cy): (usize, usize),
+        gw: usize,
+        gh: usize,
+        md2: f32,
+    ) -> bool {
+        for y in cy.saturating_sub(1)..(cy + 2).min(gh) {
+            for x in cx.saturating_sub(1)..(cx + 2).min(gw) {
+                let mut j = self.cell_head[y * gw + x];
+                while j != u32::MAX {
+                    let q = self.pts[j as usize];
+                    if (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) < md2 {
+                        return true;
+                    }
+                    j = self.next_in_cell[j as usize];
+                }
+            }
+        }
+        false
     }
 
     fn finish_frame(&mut self, t_ns: i64) {
