@@ -8,7 +8,7 @@ use uavnav_core::{CameraModel, Egomotion, ImageFormat, MotionPrior};
 
 use crate::decode::{DecodeError, LumaDecoder};
 use crate::essential::to_quat;
-use crate::klt::{Affine, KltParams, KltScratch, best_corner_in, invert2, track_point};
+use crate::klt::{Affine, KltParams, KltScratch, best_corner_in, invert2, track, track_point};
 use crate::pyramid::{Pyramid, frame_stats};
 use crate::solve::{SolveParams, SolveScratch, solve};
 
@@ -110,6 +110,11 @@ pub struct VisionParams {
     /// Levels used when the prior predicts the whole flow (rotation, terrain and translation;
     /// paper IV-A). Default 2.
     pub aided_levels: usize,
+    /// With the full prediction, KLT first runs on the finest level alone; the result is kept
+    /// when it converged within this distance of the prediction, px, else the `aided_levels`
+    /// pyramid is searched (paper IV-A: a good prediction needs no coarse levels). 0 disables.
+    /// Default 2.
+    pub aided_trust_px: f32,
     /// Use the prior to predict feature positions (IMU aid). Default true.
     pub imu_aid: bool,
     /// Lucas–Kanade settings.
@@ -150,6 +155,7 @@ impl Default for VisionParams {
             max_features: 250,
             pyramid_levels: 3,
             aided_levels: 2,
+            aided_trust_px: 2.0,
             imu_aid: true,
             klt: KltParams::default(),
             fb_threshold_px: 0.5,
@@ -532,6 +538,7 @@ impl FrontEnd {
             levels.max(1) - 1
         };
         let top = levels.max(1) - 1;
+        let direct = aid && full_prediction && self.params.aided_trust_px > 0.0;
         let fb2 = self.params.fb_threshold_px * self.params.fb_threshold_px;
         for i in 0..self.pts.len() {
             let p0 = self.pts[i];
@@ -540,16 +547,7 @@ impl FrontEnd {
             } else {
                 (p0, None)
             };
-            let Some(p1) = track_point(
-                &self.prev,
-                &self.cur,
-                p0,
-                guess,
-                affine,
-                top,
-                &self.params.klt,
-                &mut self.klt,
-            ) else {
+            let Some(p1) = self.track_forward(p0, guess, affine, top, direct) else {
                 continue;
             };
             // backward: start from the inverse prediction (p1 shifted back by the predicted flow)
@@ -578,6 +576,29 @@ impl FrontEnd {
             self.m_x1.push(Vector3::new(n1.x, n1.y, 1.0));
             self.m_px1.push(p1);
         }
+    }
+
+    /// Forward KLT from `p0` starting at `guess`: with `direct`, the finest level alone first
+    /// (kept when it converged within `aided_trust_px` of the guess), else from `top`.
+    fn track_forward(
+        &mut self,
+        p0: [f32; 2],
+        guess: [f32; 2],
+        affine: Affine,
+        top: usize,
+        direct: bool,
+    ) -> Option<[f32; 2]> {
+        let (prev, cur, kp) = (&self.prev, &self.cur, &self.params.klt);
+        if direct && top > 0 {
+            let trust2 = self.params.aided_trust_px * self.params.aided_trust_px;
+            if let Some(t) = track(prev, cur, p0, guess, affine, 0, kp, &mut self.klt) {
+                let (dx, dy) = (t.pos[0] - guess[0], t.pos[1] - guess[1]);
+                if t.converged && dx * dx + dy * dy <= trust2 {
+                    return Some(t.pos);
+                }
+            }
+        }
+        track_point(prev, cur, p0, guess, affine, top, kp, &mut self.klt)
     }
 
     /// Keeps the tracked features (only the solver's inliers when it succeeded) as the new
