@@ -56,14 +56,28 @@ impl LumaDecoder {
 
     /// Decodes `data`; on success the luma plane (row-major, `width × height`) is returned.
     pub fn decode(&mut self, format: ImageFormat, data: &[u8]) -> Result<&[u8], DecodeError> {
-        match format {
-            ImageFormat::Jpeg => self.decode_jpeg(data)?,
-            ImageFormat::Png => self.decode_png(data)?,
-        }
-        Ok(&self.buf)
+        let mut buf = std::mem::take(&mut self.buf);
+        let res = self.decode_into(format, data, &mut buf);
+        self.buf = buf;
+        res.map(|()| &self.buf[..])
     }
 
-    /// The last decoded luma plane.
+    /// Decodes `data` into `out` (resized to `width × height`; its allocation is reused), so the
+    /// caller can decode straight into its own frame buffer. On error `out` holds garbage.
+    pub fn decode_into(
+        &mut self,
+        format: ImageFormat,
+        data: &[u8],
+        out: &mut Vec<u8>,
+    ) -> Result<(), DecodeError> {
+        out.resize(self.width as usize * self.height as usize, 0);
+        match format {
+            ImageFormat::Jpeg => self.decode_jpeg(data, out),
+            ImageFormat::Png => self.decode_png(data, out),
+        }
+    }
+
+    /// The last luma plane decoded by [`Self::decode`].
     pub fn decode_buffer(&self) -> &[u8] {
         &self.buf
     }
@@ -77,7 +91,7 @@ impl LumaDecoder {
         }
     }
 
-    fn decode_jpeg(&mut self, data: &[u8]) -> Result<(), DecodeError> {
+    fn decode_jpeg(&self, data: &[u8], out: &mut [u8]) -> Result<(), DecodeError> {
         let corrupt = |detail: String| DecodeError::Corrupt {
             format: "jpeg",
             detail,
@@ -104,14 +118,13 @@ impl LumaDecoder {
         let need = dec
             .output_buffer_size()
             .ok_or_else(|| corrupt("no output size".into()))?;
-        if need != self.buf.len() {
+        if need != out.len() {
             return Err(corrupt(format!("unexpected output size {need}")));
         }
-        dec.decode_into(&mut self.buf)
-            .map_err(|e| corrupt(format!("{e:?}")))
+        dec.decode_into(out).map_err(|e| corrupt(format!("{e:?}")))
     }
 
-    fn decode_png(&mut self, data: &[u8]) -> Result<(), DecodeError> {
+    fn decode_png(&self, data: &[u8], out: &mut [u8]) -> Result<(), DecodeError> {
         let img =
             image::load_from_memory_with_format(data, image::ImageFormat::Png).map_err(|e| {
                 DecodeError::Corrupt {
@@ -123,7 +136,7 @@ impl LumaDecoder {
             return Err(self.mismatch(img.width() as usize, img.height() as usize));
         }
         let luma = img.into_luma8();
-        self.buf.copy_from_slice(luma.as_raw());
+        out.copy_from_slice(luma.as_raw());
         Ok(())
     }
 }

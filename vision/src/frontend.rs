@@ -332,7 +332,10 @@ impl FrontEnd {
             timings: StageTimings::default(),
             tracked: 0,
         };
-        let decoded = self.decoder.decode(format, data).map(|_| ());
+        // straight into the new frame's pyramid (no copy)
+        let decoded = self
+            .decoder
+            .decode_into(format, data, &mut self.cur.base.data);
         let t_decoded = (self.clock)();
         res.timings.decode_us = t_decoded.saturating_sub(t_start);
         if let Err(e) = decoded {
@@ -354,10 +357,8 @@ impl FrontEnd {
             return res;
         }
         let (w, h) = (self.camera.width as usize, self.camera.height as usize);
-        // borrow split: decode buffer is read while cur is written
-        let luma = self.decoder.decode_buffer();
-        self.cur
-            .build(luma, w, h, self.params.pyramid_levels.max(2));
+        (self.cur.base.width, self.cur.base.height) = (w, h);
+        self.cur.rebuild(self.params.pyramid_levels.max(2));
         let reject = self.check_frame();
         let t_pyramid = (self.clock)();
         res.timings.pyramid_us = t_pyramid.saturating_sub(t_decoded);
@@ -660,8 +661,7 @@ impl FrontEnd {
         // A cell that had no corner is left alone for a few frames: re-searching texture-poor
         // cells every frame would dominate the frame time.
         self.cooldown.resize(gw * gh, 0);
-        let lvl = usize::from(self.cur.levels.len() > 1);
-        let img = &self.cur.levels[lvl];
+        let lvl = usize::from(!self.cur.coarse.is_empty());
         for c in 0..gw * gh {
             if self.cell_head[c] != u32::MAX || self.pts.len() >= gw * gh {
                 continue;
@@ -677,12 +677,12 @@ impl FrontEnd {
                 (cy * cell) >> lvl,
                 ((cy + 1) * cell) >> lvl,
             );
-            match best_corner_in(
-                img,
-                rect,
-                self.params.corner_step,
-                self.params.min_corner_score,
-            ) {
+            let (step, min_score) = (self.params.corner_step, self.params.min_corner_score);
+            let corner = match self.cur.coarse.first() {
+                Some(img) => best_corner_in(img, rect, step, min_score),
+                None => best_corner_in(&self.cur.base, rect, step, min_score),
+            };
+            match corner {
                 Some((p, _)) => {
                     let p = [p[0] * (1 << lvl) as f32, p[1] * (1 << lvl) as f32];
                     let n = self

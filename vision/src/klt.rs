@@ -2,7 +2,7 @@
 //! zero-mean patches (robust to exposure changes) and an externally supplied initial guess
 //! (the IMU/terrain prediction).
 
-use crate::pyramid::{GrayF32, Pyramid};
+use crate::pyramid::{Image, Pixel, Pyramid};
 
 /// Lucas–Kanade settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -46,6 +46,8 @@ pub struct KltScratch {
     gy: Box<[f32; MAX_WIN]>,
     /// The sampled window of `next`.
     win: Box<[f32; MAX_WIN]>,
+    /// Horizontally interpolated rows (separable bilinear sampling).
+    hbuf: Box<[f32; MAX_EXT + 26]>,
     /// 1 in the window's lanes, 0 in the pads, for the half window `mask_r` (0: not yet set).
     mask: Box<[f32; MAX_WIN]>,
     mask_r: usize,
@@ -59,6 +61,7 @@ impl Default for KltScratch {
             gx: Box::new([0.0; MAX_WIN]),
             gy: Box::new([0.0; MAX_WIN]),
             win: Box::new([0.0; MAX_WIN]),
+            hbuf: Box::new([0.0; MAX_EXT + 26]),
             mask: Box::new([0.0; MAX_WIN]),
             mask_r: 0,
         }
@@ -114,10 +117,7 @@ pub fn track(
     params: &KltParams,
     s: &mut KltScratch,
 ) -> Option<Track> {
-    let depth = prev.levels.len().min(next.levels.len());
-    if depth == 0 {
-        return None;
-    }
+    let depth = prev.depth().min(next.depth());
     // the template is warped by the inverse map; a degenerate prediction is not usable
     let warp = match affine {
         Some(a) => Some(invert2(a)?),
@@ -130,8 +130,19 @@ pub fn track(
     for level in (0..=top).rev() {
         let sc = 1.0 / (1u32 << level) as f32;
         let pl = [p0[0] * sc, p0[1] * sc];
-        let lv = (&prev.levels[level], &next.levels[level]);
-        match track_level(lv.0, lv.1, pl, flow, warp, params, s) {
+        let tracked = match level {
+            0 => track_level(&prev.base, &next.base, pl, flow, warp, params, s),
+            l => track_level(
+                &prev.coarse[l - 1],
+                &next.coarse[l - 1],
+                pl,
+                flow,
+                warp,
+                params,
+                s,
+            ),
+        };
+        match tracked {
             Some((f, c)) => {
                 flow = f;
                 converged = c;
@@ -182,9 +193,9 @@ fn dot4(a: &[f32], b: &[f32]) -> f32 {
 
 /// Dispatches one pyramid level to the kernel specialised for the window size (fixed loop
 /// lengths let the compiler unroll and vectorize the rows). Half windows above 10 use 10.
-fn track_level(
-    prev: &GrayF32,
-    next: &GrayF32,
+fn track_level<T: Pixel>(
+    prev: &Image<T>,
+    next: &Image<T>,
     p: [f32; 2],
     flow: [f32; 2],
     warp: Option<[f32; 4]>,
@@ -193,16 +204,16 @@ fn track_level(
 ) -> Option<([f32; 2], bool)> {
     // (R, chunks of four lanes per row of 2R+1 samples)
     match params.half_window {
-        0 | 1 => level_kernel::<1, 1>(prev, next, p, flow, warp, params, s),
-        2 => level_kernel::<2, 2>(prev, next, p, flow, warp, params, s),
-        3 => level_kernel::<3, 2>(prev, next, p, flow, warp, params, s),
-        4 => level_kernel::<4, 3>(prev, next, p, flow, warp, params, s),
-        5 => level_kernel::<5, 3>(prev, next, p, flow, warp, params, s),
-        6 => level_kernel::<6, 4>(prev, next, p, flow, warp, params, s),
-        7 => level_kernel::<7, 4>(prev, next, p, flow, warp, params, s),
-        8 => level_kernel::<8, 5>(prev, next, p, flow, warp, params, s),
-        9 => level_kernel::<9, 5>(prev, next, p, flow, warp, params, s),
-        _ => level_kernel::<10, 6>(prev, next, p, flow, warp, params, s),
+        0 | 1 => level_kernel::<T, 1, 1>(prev, next, p, flow, warp, params, s),
+        2 => level_kernel::<T, 2, 2>(prev, next, p, flow, warp, params, s),
+        3 => level_kernel::<T, 3, 2>(prev, next, p, flow, warp, params, s),
+        4 => level_kernel::<T, 4, 3>(prev, next, p, flow, warp, params, s),
+        5 => level_kernel::<T, 5, 3>(prev, next, p, flow, warp, params, s),
+        6 => level_kernel::<T, 6, 4>(prev, next, p, flow, warp, params, s),
+        7 => level_kernel::<T, 7, 4>(prev, next, p, flow, warp, params, s),
+        8 => level_kernel::<T, 8, 5>(prev, next, p, flow, warp, params, s),
+        9 => level_kernel::<T, 9, 5>(prev, next, p, flow, warp, params, s),
+        _ => level_kernel::<T, 10, 6>(prev, next, p, flow, warp, params, s),
     }
 }
 
@@ -224,8 +235,8 @@ struct Template {
 /// which reads pixels `[xi, xi + cols] × [yi, yi + rows]` (bilinear needs the extra one);
 /// `None` when that is not inside the image (or the position is not finite).
 #[inline]
-fn region(
-    img: &GrayF32,
+fn region<T: Pixel>(
+    img: &Image<T>,
     x0: f32,
     y0: f32,
     cols: usize,
@@ -246,27 +257,37 @@ fn region(
 
 /// Bilinear samples of `img` on a `rows × cols` grid with unit spacing starting at the
 /// sub-pixel position `(xi + ax, yi + ay)` (one set of weights for the whole grid), minus
-/// `offset`, into `out` (row-major, `cols` per row). The caller checked the region.
-#[allow(clippy::too_many_arguments)] // a sampling kernel: the grid and the weights
+/// `offset`, into `out` (row-major, `cols` per row). Separable: each image row is interpolated
+/// horizontally once into `h` (`(rows + 1) × cols`), then pairs of rows vertically. The caller
+/// checked the region.
+#[allow(clippy::too_many_arguments)] // a sampling kernel: the grid, the weights, the buffers
 #[inline(always)]
-fn sample_grid(
-    img: &GrayF32,
+fn sample_grid<T: Pixel>(
+    img: &Image<T>,
     (xi, yi, ax, ay): (usize, usize, f32, f32),
     rows: usize,
     cols: usize,
     offset: f32,
+    h: &mut [f32],
     out: &mut [f32],
 ) {
-    let (w00, w01) = ((1.0 - ax) * (1.0 - ay), ax * (1.0 - ay));
-    let (w10, w11) = ((1.0 - ax) * ay, ax * ay);
     let w = img.width;
+    for y in 0..=rows {
+        let r = &img.data[(yi + y) * w + xi..][..cols + 1];
+        let hr = &mut h[y * cols..y * cols + cols];
+        for x in 0..cols {
+            let a = r[x].value();
+            hr[x] = a + ax * (r[x + 1].value() - a);
+        }
+    }
     for y in 0..rows {
-        let base = (yi + y) * w + xi;
-        let r0 = &img.data[base..base + cols + 1];
-        let r1 = &img.data[base + w..base + w + cols + 1];
+        let (t, b) = (
+            &h[y * cols..y * cols + cols],
+            &h[(y + 1) * cols..(y + 2) * cols],
+        );
         let o = &mut out[y * cols..y * cols + cols];
         for x in 0..cols {
-            o[x] = w00 * r0[x] + w01 * r0[x + 1] + w10 * r1[x] + w11 * r1[x + 1] - offset;
+            o[x] = t[x] + ay * (b[x] - t[x]) - offset;
         }
     }
 }
@@ -275,19 +296,20 @@ fn sample_grid(
 /// the gradients) of `ew` samples (the padded row plus the border), on the grid `p + M x`
 /// when a warp `M` is given.
 #[inline(always)]
-fn sample_template<const R: usize>(
-    prev: &GrayF32,
+fn sample_template<T: Pixel, const R: usize>(
+    prev: &Image<T>,
     p: [f32; 2],
     warp: Option<[f32; 4]>,
     ew: usize,
     ext: &mut [f32],
+    hbuf: &mut [f32],
 ) -> Option<()> {
     let rows = 2 * R + 3;
     let h = (R + 1) as f32;
     match warp {
         None => {
             let at = region(prev, p[0] - h, p[1] - h, ew, rows)?;
-            sample_grid(prev, at, rows, ew, 0.0, ext);
+            sample_grid(prev, at, rows, ew, 0.0, hbuf, ext);
         }
         Some(m) => sample_warped(prev, p, &m, h, rows, ew, ext)?,
     }
@@ -295,8 +317,8 @@ fn sample_template<const R: usize>(
 }
 
 /// [`sample_template`] on the warped grid `p + M (x − h, y − h)`, per-pixel bilinear.
-fn sample_warped(
-    prev: &GrayF32,
+fn sample_warped<T: Pixel>(
+    prev: &Image<T>,
     p: [f32; 2],
     m: &[f32; 4],
     h: f32,
@@ -334,8 +356,9 @@ fn sample_warped(
             let (fx, fy) = (sx as usize, sy as usize);
             let (ax, ay) = (sx - fx as f32, sy - fy as f32);
             let k = fy * w + fx;
-            let top = d[k] + ax * (d[k + 1] - d[k]);
-            let bot = d[k + w] + ax * (d[k + w + 1] - d[k + w]);
+            let (a0, a1) = (d[k].value(), d[k + 1].value());
+            let (b0, b1) = (d[k + w].value(), d[k + w + 1].value());
+            let (top, bot) = (a0 + ax * (a1 - a0), b0 + ax * (b1 - b0));
             *out = top + ay * (bot - top);
         }
     }
@@ -402,9 +425,9 @@ fn prepare_template<const R: usize, const NC: usize>(
 /// robust to exposure changes. With `e = t̃ − (J − J̄)` the right-hand side
 /// `Σ e ∇T = Σ t̃ ∇T − Σ J ∇T + J̄ Σ ∇T` needs three sums of the sampled window `J` per
 /// iteration. Returns the flow and whether the last update was below `epsilon_px`.
-fn level_kernel<const R: usize, const NC: usize>(
-    prev: &GrayF32,
-    next: &GrayF32,
+fn level_kernel<T: Pixel, const R: usize, const NC: usize>(
+    prev: &Image<T>,
+    next: &Image<T>,
     p: [f32; 2],
     mut flow: [f32; 2],
     warp: Option<[f32; 4]>,
@@ -415,17 +438,18 @@ fn level_kernel<const R: usize, const NC: usize>(
     let pw = 4 * NC;
     debug_assert!(pw >= side && pw < side + 4);
     let n = side * pw;
-    sample_template::<R>(prev, p, warp, pw + 2, &mut s.ext[..])?;
+    sample_template::<T, R>(prev, p, warp, pw + 2, &mut s.ext[..], &mut s.hbuf[..])?;
     let t = prepare_template::<R, NC>(s, params.min_eigen)?;
     let inv = 1.0 / (t.gxx * t.gyy - t.gxy * t.gxy);
     let nf = (side * side) as f32;
-    let (gx, gy, win, mask) = (&s.gx[..n], &s.gy[..n], &mut s.win[..n], &s.mask[..n]);
+    let (gx, gy, mask) = (&s.gx[..n], &s.gy[..n], &s.mask[..n]);
+    let (win, hbuf) = (&mut s.win[..n], &mut s.hbuf[..]);
     let eps2 = params.epsilon_px * params.epsilon_px;
     for _ in 0..params.max_iterations {
         let q = [p[0] + flow[0] - R as f32, p[1] + flow[1] - R as f32];
         let at = region(next, q[0], q[1], pw, side)?;
         // samples shifted by the template mean (keeps the sums small)
-        sample_grid(next, at, side, pw, t.mean, win);
+        sample_grid(next, at, side, pw, t.mean, hbuf, win);
         // the pad lanes carry samples but zero gradients: masked in Σ J only
         let jmean = dot4(win, mask) / nf;
         let bx = t.tg[0] - dot4(win, gx) + jmean * t.sg[0];
@@ -446,7 +470,7 @@ fn level_kernel<const R: usize, const NC: usize>(
 /// Shi–Tomasi score (mean minimum eigenvalue of the 5×5 structure tensor) at an integer pixel.
 /// The caller keeps `(x, y)` at least 3 px inside the image.
 #[inline]
-pub fn shi_tomasi(img: &GrayF32, x: usize, y: usize) -> f32 {
+pub fn shi_tomasi<T: Pixel>(img: &Image<T>, x: usize, y: usize) -> f32 {
     let w = img.width;
     let (mut a, mut b, mut c) = (0.0f32, 0.0f32, 0.0f32);
     for yy in y - 2..=y + 2 {
@@ -454,8 +478,8 @@ pub fn shi_tomasi(img: &GrayF32, x: usize, y: usize) -> f32 {
         let up = &img.data[(yy - 1) * w..];
         let dn = &img.data[(yy + 1) * w..];
         for xx in x - 2..=x + 2 {
-            let gx = 0.5 * (row[xx + 1] - row[xx - 1]);
-            let gy = 0.5 * (dn[xx] - up[xx]);
+            let gx = 0.5 * (row[xx + 1].value() - row[xx - 1].value());
+            let gy = 0.5 * (dn[xx].value() - up[xx].value());
             a += gx * gx;
             b += gx * gy;
             c += gy * gy;
@@ -465,8 +489,8 @@ pub fn shi_tomasi(img: &GrayF32, x: usize, y: usize) -> f32 {
 }
 
 /// Best corner inside `[x0, x1) × [y0, y1)` sampled every `step` px; `None` below `min_score`.
-pub fn best_corner_in(
-    img: &GrayF32,
+pub fn best_corner_in<T: Pixel>(
+    img: &Image<T>,
     (x0, x1, y0, y1): (usize, usize, usize, usize),
     step: usize,
     min_score: f32,
@@ -532,7 +556,7 @@ mod tests {
                     50 + gy * 30,
                     50 + gy * 30 + 30,
                 );
-                let Some((p, _)) = best_corner_in(&pa.levels[0], cell, 2, 2.0) else {
+                let Some((p, _)) = best_corner_in(&pa.base, cell, 2, 2.0) else {
                     continue;
                 };
                 let (px, py) = (f64::from(p[0]), f64::from(p[1]));

@@ -9,7 +9,7 @@
 //! |---|---|
 //! | [`frontend`] | [`FrontEnd`]: decode → pyramid → checks → aided KLT → solve; [`VisionParams`], [`FrameResult`], [`NoMeasurement`] |
 //! | [`decode`] | JPEG/PNG → 8-bit luma into a reused buffer |
-//! | [`pyramid`] | float images, pyramid, frame statistics (black/saturated/textureless/blurred) |
+//! | [`pyramid`] | 8-bit frame + `f32` coarse levels, pyramid, frame statistics (black/saturated/textureless/blurred) |
 //! | [`klt`] | grid Shi–Tomasi corners and pyramidal Lucas–Kanade (eq. 12) |
 //! | [`essential`] | 8-point (eqs. 13–17), Huang–Faugeras (18–20), cheirality, covariance (22–28), Sampson refinement |
 //! | [`plane`] | plane-aware solver: known ground normal/distance → metric translation |
