@@ -1,7 +1,7 @@
 //! The per-frame pipeline: decode → pyramid → frame checks → IMU-aided KLT with a
 //! forward–backward check → egomotion → feature replenishment.
 
-use nalgebra::{Isometry3, Matrix3, Point2, Unit, UnitQuaternion, Vector2, Vector3};
+use nalgebra::{Isometry3, Matrix2, Matrix3, Point2, Unit, UnitQuaternion, Vector2, Vector3};
 use thiserror::Error;
 use uavnav_core::rng::Rng;
 use uavnav_core::{CameraModel, Egomotion, ImageFormat, MotionPrior};
@@ -483,8 +483,11 @@ impl FrontEnd {
         }
     }
 
-    /// Prediction plus its local affine map (finite differences of [`Self::predict`] over one
-    /// pixel); the map is dropped when it is within 3% of the identity (fast path).
+    /// Prediction plus its local affine map: finite differences of [`Self::predict`] over a
+    /// step of about one pixel taken in normalized coordinates, mapped back to pixels through
+    /// the finite-difference Jacobian of the lens distortion (so only the distortion is
+    /// evaluated, never its iterative inverse). The map is dropped when it is within 3% of the
+    /// identity (fast path).
     fn predict_affine(
         &self,
         px: [f32; 2],
@@ -493,19 +496,29 @@ impl FrontEnd {
         prior: &MotionPrior,
     ) -> ([f32; 2], Affine) {
         let g = self.predict(px, ray, r, prior);
-        let mut cols = [[0.0f32; 2]; 2];
-        for (k, col) in cols.iter_mut().enumerate() {
-            let q = [
-                px[0] + if k == 0 { 1.0 } else { 0.0 },
-                px[1] + if k == 1 { 1.0 } else { 0.0 },
-            ];
-            let n = self
-                .camera
-                .pixel_to_normalized(&Point2::new(f64::from(q[0]), f64::from(q[1])));
-            let gq = self.predict(q, &Vector3::new(n.x, n.y, 1.0), r, prior);
-            *col = [gq[0] - g[0], gq[1] - g[1]];
+        let h = 1.0 / self.camera.fx;
+        let p0 = self.camera.normalized_to_pixel(&Vector2::new(ray.x, ray.y));
+        // columns: pixel change in frame 0 (d0) and predicted pixel change in frame 1 (d1)
+        // per normalized step along x and y
+        let (mut d0, mut d1) = (Matrix2::zeros(), Matrix2::zeros());
+        for k in 0..2 {
+            let mut n = *ray;
+            n[k] += h;
+            let pk = self.camera.normalized_to_pixel(&Vector2::new(n.x, n.y));
+            let gk = self.predict(px, &n, r, prior);
+            d0.set_column(k, &Vector2::new(pk.x - p0.x, pk.y - p0.y));
+            let dg = [f64::from(gk[0] - g[0]), f64::from(gk[1] - g[1])];
+            d1.set_column(k, &Vector2::new(dg[0], dg[1]));
         }
-        let a = [cols[0][0], cols[1][0], cols[0][1], cols[1][1]];
+        let Some(m) = d0.try_inverse().map(|i| d1 * i) else {
+            return (g, None);
+        };
+        let a = [
+            m[(0, 0)] as f32,
+            m[(0, 1)] as f32,
+            m[(1, 0)] as f32,
+            m[(1, 1)] as f32,
+        ];
         let dev = (a[0] - 1.0).abs() + a[1].abs() + a[2].abs() + (a[3] - 1.0).abs();
         let sane = a.iter().all(|v| v.is_finite()) && (a[0] * a[3] - a[1] * a[2]) > 0.25;
         (g, (dev > 0.03 && sane).then_some(a))
