@@ -8,7 +8,9 @@ use uavnav_core::{CameraModel, Egomotion, ImageFormat, MotionPrior};
 
 use crate::decode::{DecodeError, LumaDecoder};
 use crate::essential::to_quat;
-use crate::klt::{Affine, KltParams, KltScratch, best_corner_in, invert2, track, track_point};
+use crate::klt::{
+    Affine, KltParams, KltScratch, Slot, best_corner_in, invert2, track_with_templates,
+};
 use crate::pyramid::{Pyramid, frame_stats};
 use crate::solve::{SolveParams, SolveScratch, solve};
 
@@ -223,6 +225,9 @@ pub struct FrontEnd {
     cur_sharpness: f32,
     /// Feature pixels in the reference frame and their normalized rays.
     pts: Vec<[f32; 2]>,
+    /// Per feature: the slot of its level-0 template saved by the last backward check
+    /// (`u32::MAX`: none, e.g. a new corner).
+    tmpl: Vec<u32>,
     rays: Vec<Vector3<f64>>,
     // per-frame scratch
     m_x0: Vec<Vector3<f64>>,
@@ -265,6 +270,7 @@ impl FrontEnd {
             prev_sharpness: 0.0,
             cur_sharpness: 0.0,
             pts: Vec::with_capacity(cap),
+            tmpl: Vec::with_capacity(cap),
             rays: Vec::with_capacity(cap),
             m_x0: Vec::with_capacity(cap),
             m_x1: Vec::with_capacity(cap),
@@ -310,6 +316,7 @@ impl FrontEnd {
         self.prev_t_ns = None;
         self.pts.clear();
         self.rays.clear();
+        self.tmpl.clear();
         self.cooldown.clear();
     }
 
@@ -561,13 +568,20 @@ impl FrontEnd {
             } else {
                 (p0, None)
             };
-            let Some(p1) = self.track_forward(p0, guess, affine, top, direct) else {
+            let load = match self.tmpl[i] {
+                u32::MAX => Slot::None,
+                k => Slot::Load(k as usize),
+            };
+            let Some(p1) = self.track_forward(p0, guess, affine, top, direct, load) else {
                 continue;
             };
-            // backward: start from the inverse prediction (p1 shifted back by the predicted flow)
+            // backward: start from the inverse prediction (p1 shifted back by the predicted flow);
+            // its level-0 template is the next frame's forward template if p1 is kept (slot =
+            // index of this track)
             let bg = [p1[0] - (guess[0] - p0[0]), p1[1] - (guess[1] - p0[1])];
             let back_affine = affine.and_then(invert2);
-            let Some(pb) = track_point(
+            let save = Slot::Save(self.m_px1.len());
+            let Some(pb) = track_with_templates(
                 &self.cur,
                 &self.prev,
                 p1,
@@ -576,9 +590,11 @@ impl FrontEnd {
                 back_top,
                 &self.params.klt,
                 &mut self.klt,
+                save,
             ) else {
                 continue;
             };
+            let pb = pb.pos;
             let (dx, dy) = (pb[0] - p0[0], pb[1] - p0[1]);
             if dx * dx + dy * dy > fb2 {
                 continue;
@@ -593,7 +609,8 @@ impl FrontEnd {
     }
 
     /// Forward KLT from `p0` starting at `guess`: with `direct`, the finest level alone first
-    /// (kept when it converged within `aided_trust_px` of the guess), else from `top`.
+    /// (kept when it converged within `aided_trust_px` of the guess), else from `top`. `load`:
+    /// the saved level-0 template of this feature, if any.
     fn track_forward(
         &mut self,
         p0: [f32; 2],
@@ -601,18 +618,21 @@ impl FrontEnd {
         affine: Affine,
         top: usize,
         direct: bool,
+        load: Slot,
     ) -> Option<[f32; 2]> {
         let (prev, cur, kp) = (&self.prev, &self.cur, &self.params.klt);
         if direct && top > 0 {
             let trust2 = self.params.aided_trust_px * self.params.aided_trust_px;
-            if let Some(t) = track(prev, cur, p0, guess, affine, 0, kp, &mut self.klt) {
+            let s = &mut self.klt;
+            if let Some(t) = track_with_templates(prev, cur, p0, guess, affine, 0, kp, s, load) {
                 let (dx, dy) = (t.pos[0] - guess[0], t.pos[1] - guess[1]);
                 if t.converged && dx * dx + dy * dy <= trust2 {
                     return Some(t.pos);
                 }
             }
         }
-        track_point(prev, cur, p0, guess, affine, top, kp, &mut self.klt)
+        track_with_templates(prev, cur, p0, guess, affine, top, kp, &mut self.klt, load)
+            .map(|t| t.pos)
     }
 
     /// Keeps the tracked features (only the solver's inliers when it succeeded) as the new
@@ -620,14 +640,17 @@ impl FrontEnd {
     fn keep_tracks(&mut self, solved: bool) {
         self.pts.clear();
         self.rays.clear();
+        self.tmpl.clear();
         if solved {
             for &i in &self.solve_scratch.inliers {
                 self.pts.push(self.m_px1[i]);
                 self.rays.push(self.m_x1[i]);
+                self.tmpl.push(i as u32);
             }
         } else {
             self.pts.extend_from_slice(&self.m_px1);
             self.rays.extend_from_slice(&self.m_x1);
+            self.tmpl.extend(0..self.m_px1.len() as u32);
         }
     }
 
@@ -664,12 +687,14 @@ impl FrontEnd {
             let c = cy * gw + cx;
             self.pts[k] = p;
             self.rays[k] = self.rays[i];
+            self.tmpl[k] = self.tmpl[i];
             self.next_in_cell.push(self.cell_head[c]);
             self.cell_head[c] = k as u32;
             k += 1;
         }
         self.pts.truncate(k);
         self.rays.truncate(k);
+        self.tmpl.truncate(k);
         // Search on level 1 (4× fewer candidates; the exact corner peak does not matter to KLT).
         // A cell that had no corner is left alone for a few frames: re-searching texture-poor
         // cells every frame would dominate the frame time.
@@ -703,6 +728,7 @@ impl FrontEnd {
                         .pixel_to_normalized(&Point2::new(f64::from(p[0]), f64::from(p[1])));
                     self.pts.push(p);
                     self.rays.push(Vector3::new(n.x, n.y, 1.0));
+                    self.tmpl.push(u32::MAX);
                 }
                 None => self.cooldown[c] = self.params.empty_cell_cooldown,
             }
@@ -735,6 +761,7 @@ impl FrontEnd {
 
     fn finish_frame(&mut self, t_ns: i64) {
         std::mem::swap(&mut self.prev, &mut self.cur);
+        self.klt.next_frame();
         self.prev_t_ns = Some(t_ns);
         self.prev_sharpness = self.cur_sharpness;
     }

@@ -51,6 +51,77 @@ pub struct KltScratch {
     /// 1 in the window's lanes, 0 in the pads, for the half window `mask_r` (0: not yet set).
     mask: Box<[f32; MAX_WIN]>,
     mask_r: usize,
+    /// Level-0 templates saved in this frame, and those saved in the previous one.
+    saved: TemplateStore,
+    loaded: TemplateStore,
+}
+
+impl KltScratch {
+    /// Makes the templates saved since the last call loadable (and forgets the older ones):
+    /// call once per frame, when the new frame becomes the reference.
+    pub fn next_frame(&mut self) {
+        std::mem::swap(&mut self.saved, &mut self.loaded);
+        self.saved.meta.clear();
+    }
+}
+
+/// Which template slot a level-0 kernel loads from (the previous frame's store) or saves to
+/// (this frame's store); see [`track_with_templates`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Slot {
+    /// Neither.
+    None,
+    /// Use the template saved in slot `k` of the previous frame when there is one.
+    Load(usize),
+    /// Save the template into slot `k`.
+    Save(usize),
+}
+
+/// Level-0 templates (gradients and sums), slot by slot: the backward check of frame k samples
+/// the template at `p1` in frame k, exactly what the forward tracking of frame k + 1 samples at
+/// `p0 = p1` — kept instead of computed twice (only for unwarped templates).
+#[derive(Debug, Default)]
+struct TemplateStore {
+    /// Half window and gradient floats per slot the store holds.
+    r: usize,
+    n: usize,
+    /// Per slot: `gx` then `gy`.
+    grads: Vec<f32>,
+    meta: Vec<Option<Template>>,
+}
+
+impl TemplateStore {
+    fn invalidate(&mut self, k: usize) {
+        if let Some(m) = self.meta.get_mut(k) {
+            *m = None;
+        }
+    }
+
+    fn put(&mut self, k: usize, r: usize, t: &Template, gx: &[f32], gy: &[f32]) {
+        let n = gx.len();
+        if (self.r, self.n) != (r, n) {
+            (self.r, self.n) = (r, n);
+            self.meta.clear();
+        }
+        if self.meta.len() <= k {
+            self.meta.resize(k + 1, None);
+        }
+        if self.grads.len() < (k + 1) * 2 * n {
+            self.grads.resize((k + 1) * 2 * n, 0.0);
+        }
+        let g = &mut self.grads[k * 2 * n..(k + 1) * 2 * n];
+        g[..n].copy_from_slice(gx);
+        g[n..].copy_from_slice(gy);
+        self.meta[k] = Some(*t);
+    }
+
+    fn get(&self, k: usize, r: usize) -> Option<(Template, &[f32], &[f32])> {
+        let t = (*self.meta.get(k)?)?;
+        (self.r == r).then_some(())?;
+        let n = self.n;
+        let g = &self.grads[k * 2 * n..(k + 1) * 2 * n];
+        Some((t, &g[..n], &g[n..]))
+    }
 }
 
 impl Default for KltScratch {
@@ -64,6 +135,8 @@ impl Default for KltScratch {
             hbuf: Box::new([0.0; MAX_EXT + 26]),
             mask: Box::new([0.0; MAX_WIN]),
             mask_r: 0,
+            saved: TemplateStore::default(),
+            loaded: TemplateStore::default(),
         }
     }
 }
@@ -117,6 +190,34 @@ pub fn track(
     params: &KltParams,
     s: &mut KltScratch,
 ) -> Option<Track> {
+    track_with_templates(
+        prev,
+        next,
+        p0,
+        guess,
+        affine,
+        top_level,
+        params,
+        s,
+        Slot::None,
+    )
+}
+
+/// [`track`] that also loads or saves its level-0 template (`slot`): the front end saves the
+/// template of each backward check and loads it when it tracks the same point out of the same
+/// frame one frame later. Only unwarped templates (no `affine`) are saved or loaded.
+#[allow(clippy::too_many_arguments)] // the tracker's inputs are all distinct
+pub fn track_with_templates(
+    prev: &Pyramid,
+    next: &Pyramid,
+    p0: [f32; 2],
+    guess: [f32; 2],
+    affine: Affine,
+    top_level: usize,
+    params: &KltParams,
+    s: &mut KltScratch,
+    slot: Slot,
+) -> Option<Track> {
     let depth = prev.depth().min(next.depth());
     // the template is warped by the inverse map; a degenerate prediction is not usable
     let warp = match affine {
@@ -131,16 +232,11 @@ pub fn track(
         let sc = 1.0 / (1u32 << level) as f32;
         let pl = [p0[0] * sc, p0[1] * sc];
         let tracked = match level {
-            0 => track_level(&prev.base, &next.base, pl, flow, warp, params, s),
-            l => track_level(
-                &prev.coarse[l - 1],
-                &next.coarse[l - 1],
-                pl,
-                flow,
-                warp,
-                params,
-                s,
-            ),
+            0 => track_level(&prev.base, &next.base, pl, flow, warp, params, s, slot),
+            l => {
+                let (a, b) = (&prev.coarse[l - 1], &next.coarse[l - 1]);
+                track_level(a, b, pl, flow, warp, params, s, Slot::None)
+            }
         };
         match tracked {
             Some((f, c)) => {
@@ -193,6 +289,7 @@ fn dot4(a: &[f32], b: &[f32]) -> f32 {
 
 /// Dispatches one pyramid level to the kernel specialised for the window size (fixed loop
 /// lengths let the compiler unroll and vectorize the rows). Half windows above 10 use 10.
+#[allow(clippy::too_many_arguments)] // the tracker's inputs are all distinct
 fn track_level<T: Pixel>(
     prev: &Image<T>,
     next: &Image<T>,
@@ -201,24 +298,26 @@ fn track_level<T: Pixel>(
     warp: Option<[f32; 4]>,
     params: &KltParams,
     s: &mut KltScratch,
+    slot: Slot,
 ) -> Option<([f32; 2], bool)> {
     // (R, chunks of four lanes per row of 2R+1 samples)
     match params.half_window {
-        0 | 1 => level_kernel::<T, 1, 1>(prev, next, p, flow, warp, params, s),
-        2 => level_kernel::<T, 2, 2>(prev, next, p, flow, warp, params, s),
-        3 => level_kernel::<T, 3, 2>(prev, next, p, flow, warp, params, s),
-        4 => level_kernel::<T, 4, 3>(prev, next, p, flow, warp, params, s),
-        5 => level_kernel::<T, 5, 3>(prev, next, p, flow, warp, params, s),
-        6 => level_kernel::<T, 6, 4>(prev, next, p, flow, warp, params, s),
-        7 => level_kernel::<T, 7, 4>(prev, next, p, flow, warp, params, s),
-        8 => level_kernel::<T, 8, 5>(prev, next, p, flow, warp, params, s),
-        9 => level_kernel::<T, 9, 5>(prev, next, p, flow, warp, params, s),
-        _ => level_kernel::<T, 10, 6>(prev, next, p, flow, warp, params, s),
+        0 | 1 => level_kernel::<T, 1, 1>(prev, next, p, flow, warp, params, s, slot),
+        2 => level_kernel::<T, 2, 2>(prev, next, p, flow, warp, params, s, slot),
+        3 => level_kernel::<T, 3, 2>(prev, next, p, flow, warp, params, s, slot),
+        4 => level_kernel::<T, 4, 3>(prev, next, p, flow, warp, params, s, slot),
+        5 => level_kernel::<T, 5, 3>(prev, next, p, flow, warp, params, s, slot),
+        6 => level_kernel::<T, 6, 4>(prev, next, p, flow, warp, params, s, slot),
+        7 => level_kernel::<T, 7, 4>(prev, next, p, flow, warp, params, s, slot),
+        8 => level_kernel::<T, 8, 5>(prev, next, p, flow, warp, params, s, slot),
+        9 => level_kernel::<T, 9, 5>(prev, next, p, flow, warp, params, s, slot),
+        _ => level_kernel::<T, 10, 6>(prev, next, p, flow, warp, params, s, slot),
     }
 }
 
 /// The template of one level: its structure tensor and the constant parts of the right-hand
 /// side (see [`level_kernel`]).
+#[derive(Debug, Clone, Copy)]
 struct Template {
     gxx: f32,
     gxy: f32,
@@ -377,12 +476,6 @@ fn prepare_template<const R: usize, const NC: usize>(
     let pw = 4 * NC;
     let ew = pw + 2;
     let n = side * pw;
-    if s.mask_r != R {
-        for (i, m) in s.mask[..n].iter_mut().enumerate() {
-            *m = if i % pw < side { 1.0 } else { 0.0 };
-        }
-        s.mask_r = R;
-    }
     let ext = &s.ext[..(side + 2) * ew];
     let (tv, gx, gy) = (&mut s.tv[..n], &mut s.gx[..n], &mut s.gy[..n]);
     for y in 0..side {
@@ -425,6 +518,7 @@ fn prepare_template<const R: usize, const NC: usize>(
 /// robust to exposure changes. With `e = t̃ − (J − J̄)` the right-hand side
 /// `Σ e ∇T = Σ t̃ ∇T − Σ J ∇T + J̄ Σ ∇T` needs three sums of the sampled window `J` per
 /// iteration. Returns the flow and whether the last update was below `epsilon_px`.
+#[allow(clippy::too_many_arguments)] // the tracker's inputs are all distinct
 fn level_kernel<T: Pixel, const R: usize, const NC: usize>(
     prev: &Image<T>,
     next: &Image<T>,
@@ -433,13 +527,40 @@ fn level_kernel<T: Pixel, const R: usize, const NC: usize>(
     warp: Option<[f32; 4]>,
     params: &KltParams,
     s: &mut KltScratch,
+    slot: Slot,
 ) -> Option<([f32; 2], bool)> {
     let side = 2 * R + 1;
     let pw = 4 * NC;
     debug_assert!(pw >= side && pw < side + 4);
     let n = side * pw;
-    sample_template::<T, R>(prev, p, warp, pw + 2, &mut s.ext[..], &mut s.hbuf[..])?;
-    let t = prepare_template::<R, NC>(s, params.min_eigen)?;
+    if s.mask_r != R {
+        for (i, m) in s.mask[..n].iter_mut().enumerate() {
+            *m = if i % pw < side { 1.0 } else { 0.0 };
+        }
+        s.mask_r = R;
+    }
+    let loaded = match slot {
+        Slot::Load(k) if warp.is_none() => s.loaded.get(k, R).map(|(t, gx, gy)| {
+            s.gx[..n].copy_from_slice(gx);
+            s.gy[..n].copy_from_slice(gy);
+            t
+        }),
+        _ => None,
+    };
+    let t = match loaded {
+        Some(t) => t,
+        None => {
+            if let Slot::Save(k) = slot {
+                s.saved.invalidate(k);
+            }
+            sample_template::<T, R>(prev, p, warp, pw + 2, &mut s.ext[..], &mut s.hbuf[..])?;
+            let t = prepare_template::<R, NC>(s, params.min_eigen)?;
+            if let (Slot::Save(k), None) = (slot, warp) {
+                s.saved.put(k, R, &t, &s.gx[..n], &s.gy[..n]);
+            }
+            t
+        }
+    };
     let inv = 1.0 / (t.gxx * t.gyy - t.gxy * t.gxy);
     let nf = (side * side) as f32;
     let (gx, gy, mask) = (&s.gx[..n], &s.gy[..n], &s.mask[..n]);
@@ -574,6 +695,49 @@ mod tests {
         }
         assert!(n_ok > 25);
         worst
+    }
+
+    /// A template saved by one track and loaded by the next (same image, same point) gives
+    /// exactly the result of computing it again; a slot whose last save was skipped (warped
+    /// template) is not loaded.
+    #[test]
+    fn saved_templates_are_exact() {
+        let (w, h) = (320, 240);
+        let tex = Texture::new(11);
+        let id = [[1.0, 0.0], [0.0, 1.0]];
+        let a = pyr(&render_affine(&tex, w, h, id, [0.0, 0.0]), w, h);
+        let b = pyr(&render_affine(&tex, w, h, id, [3.4, -1.7]), w, h);
+        let c = pyr(&render_affine(&tex, w, h, id, [6.1, -2.9]), w, h);
+        let params = KltParams::default();
+        let p1 = [150.3, 101.7];
+        let (mut s, mut fresh) = (KltScratch::default(), KltScratch::default());
+        // "backward" b → a at p1 saves into slot 0; slot 1 is saved and then overwritten by a
+        // warped template
+        let guess = [p1[0] - 3.4, p1[1] + 1.7];
+        let save = |k| Slot::Save(k);
+        track_with_templates(&b, &a, p1, guess, None, 0, &params, &mut s, save(0)).unwrap();
+        track_with_templates(&b, &a, p1, guess, None, 0, &params, &mut s, save(1)).unwrap();
+        let warp = Some([1.01, 0.0, 0.0, 1.01]);
+        track_with_templates(&b, &a, p1, guess, warp, 0, &params, &mut s, save(1)).unwrap();
+        s.next_frame();
+        let guess = [p1[0] + 2.5, p1[1] - 1.0];
+        let want = track(&b, &c, p1, guess, None, 0, &params, &mut fresh).unwrap();
+        for k in 0..2 {
+            let got =
+                track_with_templates(&b, &c, p1, guess, None, 0, &params, &mut s, Slot::Load(k))
+                    .unwrap();
+            assert_eq!(got, want);
+        }
+        // the load does happen: slot 0 used for another point gives another answer
+        let q = [p1[0] + 4.0, p1[1] + 3.0];
+        let gq = [q[0] + 2.5, q[1] - 1.0];
+        let other = track(&b, &c, q, gq, None, 0, &params, &mut fresh);
+        let misused = track_with_templates(&b, &c, q, gq, None, 0, &params, &mut s, Slot::Load(0));
+        assert_ne!(other, misused);
+        assert!(
+            (want.pos[0] - (p1[0] + 2.7)).abs() < 0.05
+                && (want.pos[1] - (p1[1] - 1.2)).abs() < 0.05
+        );
     }
 
     #[test]
