@@ -6,11 +6,10 @@ use thiserror::Error;
 use uavnav_core::rng::Rng;
 use uavnav_core::{CameraModel, Egomotion, ImageFormat, MotionPrior};
 
+use crate::corners::{CornerScratch, best_corner_with};
 use crate::decode::{DecodeError, LumaDecoder};
 use crate::essential::to_quat;
-use crate::klt::{
-    Affine, KltParams, KltScratch, Slot, best_corner_in, invert2, track_with_templates,
-};
+use crate::klt::{Affine, KltParams, KltScratch, Slot, invert2, track_with_templates};
 use crate::pyramid::{Pyramid, frame_stats};
 use crate::solve::{SolveParams, SolveScratch, solve};
 
@@ -239,6 +238,7 @@ pub struct FrontEnd {
     next_in_cell: Vec<u32>,
     cooldown: Vec<u8>,
     klt: KltScratch,
+    corners: CornerScratch,
     solve_scratch: SolveScratch,
     rng: Rng,
     clock: Clock,
@@ -279,6 +279,7 @@ impl FrontEnd {
             next_in_cell: Vec::with_capacity(cap),
             cooldown: Vec::new(),
             klt: KltScratch::default(),
+            corners: CornerScratch::default(),
             solve_scratch: SolveScratch::default(),
             rng: Rng::derive(params.seed, "vision-ransac"),
             clock: Box::new(|| 0),
@@ -716,9 +717,10 @@ impl FrontEnd {
                 ((cy + 1) * cell) >> lvl,
             );
             let (step, min_score) = (self.params.corner_step, self.params.min_corner_score);
+            let cs = &mut self.corners;
             let corner = match self.cur.coarse.first() {
-                Some(img) => best_corner_in(img, rect, step, min_score),
-                None => best_corner_in(&self.cur.base, rect, step, min_score),
+                Some(img) => best_corner_with(img, rect, step, min_score, cs),
+                None => best_corner_with(&self.cur.base, rect, step, min_score, cs),
             };
             match corner {
                 Some((p, _)) => {

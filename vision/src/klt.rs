@@ -1,7 +1,8 @@
-//! Grid-spread Shi–Tomasi corners and pyramidal Lucas–Kanade (paper IV-A, eq. 12) with
+//! Pyramidal Lucas–Kanade (paper IV-A, eq. 12) with
 //! zero-mean patches (robust to exposure changes) and an externally supplied initial guess
 //! (the IMU/terrain prediction).
 
+pub use crate::corners::{CornerScratch, best_corner_in, best_corner_with, shi_tomasi};
 use crate::pyramid::{Image, Pixel, Pyramid};
 
 /// Lucas–Kanade settings.
@@ -586,52 +587,6 @@ fn level_kernel<T: Pixel, const R: usize, const NC: usize>(
         }
     }
     Some((flow, false))
-}
-
-/// Shi–Tomasi score (mean minimum eigenvalue of the 5×5 structure tensor) at an integer pixel.
-/// The caller keeps `(x, y)` at least 3 px inside the image.
-#[inline]
-pub fn shi_tomasi<T: Pixel>(img: &Image<T>, x: usize, y: usize) -> f32 {
-    let w = img.width;
-    let (mut a, mut b, mut c) = (0.0f32, 0.0f32, 0.0f32);
-    for yy in y - 2..=y + 2 {
-        let row = &img.data[yy * w..];
-        let up = &img.data[(yy - 1) * w..];
-        let dn = &img.data[(yy + 1) * w..];
-        for xx in x - 2..=x + 2 {
-            let gx = 0.5 * (row[xx + 1].value() - row[xx - 1].value());
-            let gy = 0.5 * (dn[xx].value() - up[xx].value());
-            a += gx * gx;
-            b += gx * gy;
-            c += gy * gy;
-        }
-    }
-    0.5 * (a + c - ((a - c) * (a - c) + 4.0 * b * b).sqrt()) / 25.0
-}
-
-/// Best corner inside `[x0, x1) × [y0, y1)` sampled every `step` px; `None` below `min_score`.
-pub fn best_corner_in<T: Pixel>(
-    img: &Image<T>,
-    (x0, x1, y0, y1): (usize, usize, usize, usize),
-    step: usize,
-    min_score: f32,
-) -> Option<([f32; 2], f32)> {
-    let m = 4;
-    let (x0, y0) = (x0.max(m), y0.max(m));
-    let (x1, y1) = (
-        x1.min(img.width.saturating_sub(m)),
-        y1.min(img.height.saturating_sub(m)),
-    );
-    let mut best: Option<([f32; 2], f32)> = None;
-    for y in (y0..y1).step_by(step.max(1)) {
-        for x in (x0..x1).step_by(step.max(1)) {
-            let sc = shi_tomasi(img, x, y);
-            if sc >= min_score && best.is_none_or(|(_, b)| sc > b) {
-                best = Some(([x as f32, y as f32], sc));
-            }
-        }
-    }
-    best
 }
 
 #[cfg(test)]

@@ -10,7 +10,8 @@
 //! | [`frontend`] | [`FrontEnd`]: decode → pyramid → checks → aided KLT → solve; [`VisionParams`], [`FrameResult`], [`NoMeasurement`] |
 //! | [`decode`] | JPEG/PNG → 8-bit luma into a reused buffer |
 //! | [`pyramid`] | 8-bit frame + `f32` coarse levels, pyramid, frame statistics (black/saturated/textureless/blurred) |
-//! | [`klt`] | grid Shi–Tomasi corners and pyramidal Lucas–Kanade (eq. 12) |
+//! | [`klt`] | pyramidal Lucas–Kanade (eq. 12), vectorizable kernels, template reuse |
+//! | [`corners`] | Shi–Tomasi corner of a grid cell (box-summed structure tensors) |
 //! | [`essential`] | 8-point (eqs. 13–17), Huang–Faugeras (18–20), cheirality, covariance (22–28), Sampson refinement |
 //! | [`plane`] | plane-aware solver: known ground normal/distance → metric translation |
 //! | [`robust`] | seeded RANSAC + local optimisation for rotation, essential and plane models |
@@ -22,6 +23,7 @@
 //! Geometry convention: `x1 = R x0 + t` with `R = cam1_from_cam0` and `t` in camera 1
 //! (see [`uavnav_core::Egomotion`]).
 
+pub mod corners;
 pub mod decode;
 pub mod essential;
 pub mod frontend;
