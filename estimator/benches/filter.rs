@@ -1,15 +1,16 @@
 //! Speed targets: IMU propagation ≤ 2 µs per sample (the whole `push_imu`: output predictor,
 //! horizon nominal integration, amortised covariance prediction), one GNSS update ≤ 10 µs (position
-//! + velocity gated updates of the 24-state ESKF).
+//! + velocity gated updates of the 24-state ESKF); also one joint vision update (10 Hz).
 //!
 //! `CARGO_TARGET_DIR=/work/target-estimator cargo bench -p uavnav-estimator --bench filter`
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
-use nalgebra::Vector3;
+use nalgebra::{UnitQuaternion, Vector3};
 use uavnav_core::{FilterProfile, ImuSample};
 use uavnav_estimator::aid_sources::gnss_pos::{GnssMeas, GnssPosSource, white_noise};
 use uavnav_estimator::aid_sources::gnss_vel::GnssVelSource;
+use uavnav_estimator::aid_sources::vision;
 use uavnav_estimator::{Estimator, EstimatorParams};
 use uavnav_sim::{Flight, Scenario};
 
@@ -89,6 +90,52 @@ fn bench(c: &mut Criterion) {
                 let a = sp.fuse(&x, &mut p, &lever, &m, &r, 3.29, 5_000_000_000);
                 let v = sv.fuse(&x, &mut p, &lever, &gyro, &w_ie, &m, 3.29, 5_000_000_000);
                 std::hint::black_box((a, v, p))
+            },
+            BatchSize::SmallInput,
+        )
+    });
+    // One joint vision update (rotation + metric translation, 6-dof) against a pose clone.
+    let mut xc = x;
+    xc.clone = Some(uavnav_estimator::state::PoseClone {
+        t_ns: x.t_ns - 100_000_000,
+        q: x.q,
+        p: x.p - x.v * 0.1,
+    });
+    let mut pc = p0;
+    uavnav_estimator::state::augment_clone(&mut pc);
+    let bfc = nalgebra::Isometry3::identity();
+    let c0 = xc.clone.expect("clone");
+    let (t, _) = vision::translation_model(&xc, &c0, &bfc);
+    let mut cov = nalgebra::Matrix6::from_diagonal_element(1e-8);
+    cov.fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&(nalgebra::Matrix3::identity() * 3e-4));
+    let ego = uavnav_core::Egomotion {
+        t0_ns: c0.t_ns,
+        t1_ns: xc.t_ns,
+        cam1_from_cam0: UnitQuaternion::identity(),
+        t_dir_cam1: Some(nalgebra::Unit::new_normalize(t)),
+        t_cam1_m: Some(t + Vector3::new(0.01, -0.01, 0.0)),
+        rot_cov: cov.fixed_view::<3, 3>(0, 0).into_owned(),
+        t_cov: cov.fixed_view::<3, 3>(3, 3).into_owned(),
+        joint_cov: cov,
+        tracked: 200,
+        inliers: 180,
+        quality: 0.9,
+        solver: uavnav_core::EgomotionSolver::Plane,
+    };
+    let use_ = vision::VisionUse {
+        rotation: true,
+        translation: true,
+        joint: true,
+        cov_scale: 6.0,
+        gate_sigma: 3.29,
+    };
+    c.bench_function("eskf_vision_update (joint 6-dof)", |b| {
+        b.iter_batched(
+            || (pc, vision::VisionSource::default()),
+            |(mut p, mut src)| {
+                let dx = src.fuse_joint(&xc, &c0, &mut p, &bfc, &ego, &use_);
+                std::hint::black_box((dx, p))
             },
             BatchSize::SmallInput,
         )

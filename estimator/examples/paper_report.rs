@@ -3,6 +3,7 @@
 //! rotation, ~1° direction noise, 40 ms latency) until the vision crate is wired in.
 //!
 //! `CARGO_TARGET_DIR=/work/target-estimator cargo run --release -p uavnav-estimator --example paper_report [scenario…]`
+//! (`ORACLE_ROT_DEG`, `ORACLE_DIR_DEG`, `ORACLE_METRIC_REL` change the oracle's noise).
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 #[path = "../tests/common/mod.rs"]
@@ -25,10 +26,21 @@ fn main() {
         let s = scenario(&name, None);
         let flight = Flight::new(&s).expect("scenario simulates");
         let outages = outages_ns(&s);
+        // ORACLE_ROT_DEG / ORACLE_DIR_DEG / ORACLE_METRIC_REL change the oracle's noise, to see
+        // how the filter's attitude depends on the quality of the egomotion.
+        let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
+        let mut oracle = Oracle::default();
+        if let Some(v) = env("ORACLE_ROT_DEG") {
+            oracle.rot_sigma_rad = v.to_radians();
+        }
+        if let Some(v) = env("ORACLE_DIR_DEG") {
+            oracle.dir_sigma_rad = v.to_radians();
+        }
+        oracle.metric_rel_sigma = env("ORACLE_METRIC_REL");
         for (label, cfg) in [
             (
                 "eskf, GNSS+video",
-                RunCfg::new(FilterProfile::Eskf, true, Some(Oracle::default())),
+                RunCfg::new(FilterProfile::Eskf, true, Some(oracle)),
             ),
             (
                 "eskf, GNSS only",
@@ -36,7 +48,7 @@ fn main() {
             ),
             (
                 "paper, GNSS+video",
-                RunCfg::new(FilterProfile::Paper, true, Some(Oracle::default())),
+                RunCfg::new(FilterProfile::Paper, true, Some(oracle)),
             ),
             (
                 "paper, GNSS only",

@@ -424,10 +424,15 @@ impl Eskf {
         let use_ = VisionUse {
             rotation: self.params.use_vision_rotation,
             translation: self.params.use_vision_translation,
+            joint: self.params.vision_joint_update,
             cov_scale: self.params.vision_cov_scale,
             gate_sigma: self.params.gate_sigma,
         };
         match x.clone {
+            Some(c0) if c0.t_ns == m.t0_ns && use_.joint && use_.rotation && use_.translation => {
+                let dx = self.vision.fuse_joint(&x, &c0, &mut self.p, &bfc, m, &use_);
+                self.inject(dx);
+            }
             Some(c0) if c0.t_ns == m.t0_ns => {
                 if use_.rotation {
                     let dx = self

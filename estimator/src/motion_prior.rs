@@ -146,7 +146,11 @@ pub fn prior(
     };
     let (c0, c1) = (back.c0, back.c1);
     let r_c0n = (c0 * r_bc).inverse();
-    let n_cam0 = r_c0n * Vector3::z();
+    // The terrain is the ellipsoid at the terrain elevation: its normal is the local vertical
+    // under the vehicle, which leans away from the fixed frame's down by distance / Earth radius
+    // (≈ 0.5 mrad after 3 km). The plane solver refines the normal from the image (2° prior), so
+    // on the paper flights this moved the attitude by < 0.001°; the prior should still be right.
+    let n_cam0 = r_c0n * g.normalize();
     prior.ground_normal_cam0 = Some(Unit::new_normalize(n_cam0));
     let t_bc = body_from_cam.translation.vector;
     let p0 = now.p - now.v * ((now.t_ns - t0_ns) as f64 * 1e-9);

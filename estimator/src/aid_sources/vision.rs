@@ -8,7 +8,9 @@
 //!   (2-dof residual in the tangent plane of the predicted unit vector) or, with the terrain
 //!   distance, the metric `t`.
 
-use nalgebra::{Isometry3, Matrix3, SMatrix, UnitQuaternion, Vector2, Vector3};
+use nalgebra::{
+    Isometry3, Matrix3, Matrix6, SMatrix, SVector, UnitQuaternion, Vector2, Vector3, Vector6,
+};
 use uavnav_core::Egomotion;
 use uavnav_core::rotation::skew;
 
@@ -120,13 +122,126 @@ pub struct VisionUse {
     pub rotation: bool,
     /// Fuse the translation.
     pub translation: bool,
+    /// Fuse rotation and translation in one update with the solver's joint covariance (their
+    /// errors are strongly correlated: a small rotation and a small translation move the image
+    /// alike), instead of two independent updates.
+    pub joint: bool,
     /// Covariance scale.
     pub cov_scale: f64,
     /// Gate, σ.
     pub gate_sigma: f64,
 }
 
+/// Which part of the egomotion a joint update can use.
+enum JointKind {
+    /// Rotation and metric translation: 6-dof.
+    Metric(Vector3<f64>),
+    /// Rotation and direction of travel: 5-dof.
+    Direction(Vector3<f64>),
+}
+
 impl VisionSource {
+    /// Fuses rotation and translation of `m` together against the joint covariance (6-dof with
+    /// the metric translation, 5-dof with a direction); rotation alone when no translation is
+    /// usable. The rotation diagnostics carry the joint test ratio; the translation diagnostics
+    /// mirror the outcome with the translation part of the innovation.
+    #[allow(clippy::too_many_arguments)]
+    pub fn fuse_joint(
+        &mut self,
+        x: &Nominal,
+        c0: &PoseClone,
+        p: &mut Cov,
+        body_from_cam: &Isometry3<f64>,
+        m: &Egomotion,
+        u: &VisionUse,
+    ) -> Option<ErrVec> {
+        let kind = match (m.t_cam1_m, m.t_dir_cam1) {
+            (Some(t), _) => JointKind::Metric(t),
+            (None, Some(d)) => JointKind::Direction(d.into_inner()),
+            (None, None) => return self.fuse_rotation(x, c0, p, body_from_cam, m, u),
+        };
+        let (yr, hr) = rotation_model(x, c0, body_from_cam, &m.cam1_from_cam0);
+        let c = m.joint_cov * u.cov_scale;
+        let outcome = match kind {
+            JointKind::Metric(tm) => {
+                let (t, ht) = translation_model(x, c0, body_from_cam);
+                let mut h = SMatrix::<f64, 6, N>::zeros();
+                h.fixed_rows_mut::<3>(0).copy_from(&hr);
+                h.fixed_rows_mut::<3>(3).copy_from(&ht);
+                let y = Vector6::new(yr.x, yr.y, yr.z, tm.x - t.x, tm.y - t.y, tm.z - t.z);
+                let r = c + Matrix6::from_diagonal(&Vector6::new(
+                    1e-12, 1e-12, 1e-12, 1e-10, 1e-10, 1e-10,
+                ));
+                self.joint_update(p, &h, &r, &y, u, m.t1_ns)
+            }
+            JointKind::Direction(dir) => {
+                let Some((yd, hd, b)) = direction_model(x, c0, body_from_cam, &dir) else {
+                    return self.fuse_rotation(x, c0, p, body_from_cam, m, u);
+                };
+                // [δθ; δu] → [δθ; bᵀδu]
+                let mut a = SMatrix::<f64, 5, 6>::zeros();
+                a.fixed_view_mut::<3, 3>(0, 0)
+                    .copy_from(&Matrix3::identity());
+                a.fixed_view_mut::<2, 3>(3, 3).copy_from(&b.transpose());
+                let mut h = SMatrix::<f64, 5, N>::zeros();
+                h.fixed_rows_mut::<3>(0).copy_from(&hr);
+                h.fixed_rows_mut::<2>(3).copy_from(&hd);
+                let y = SVector::<f64, 5>::new(yr.x, yr.y, yr.z, yd.x, yd.y);
+                let mut r = a * c * a.transpose();
+                for k in 0..5 {
+                    r[(k, k)] += if k < 3 { 1e-12 } else { 1e-10 };
+                }
+                self.joint_update(p, &h, &r, &y, u, m.t1_ns)
+            }
+        };
+        match outcome {
+            UpdateOutcome::Fused(dx) => Some(dx),
+            _ => None,
+        }
+    }
+
+    /// The gated joint update; mirrors its outcome into the translation diagnostics.
+    fn joint_update<const M: usize>(
+        &mut self,
+        p: &mut Cov,
+        h: &SMatrix<f64, M, N>,
+        r: &SMatrix<f64, M, M>,
+        y: &SVector<f64, M>,
+        u: &VisionUse,
+        t_ns: i64,
+    ) -> UpdateOutcome {
+        // translation part of S before the update changes P
+        let mut t_var = [0.0; 3];
+        for (k, v) in t_var.iter_mut().enumerate().take(M - 3) {
+            let row = h.row(3 + k);
+            *v = (row * *p * row.transpose())[0] + r[(3 + k, 3 + k)];
+        }
+        let out = gated_update(p, h, r, y, u.gate_sigma, t_ns, false, &mut self.rot);
+        let t = &mut self.trans;
+        t.innov = [0.0; 3];
+        for k in 0..M - 3 {
+            t.innov[k] = y[3 + k];
+        }
+        t.innov_var = t_var;
+        t.test_ratio = self.rot.test_ratio;
+        match out {
+            UpdateOutcome::Fused(_) => {
+                t.fused += 1;
+                t.consecutive_rejects = 0;
+                t.last_fused_t_ns = t_ns;
+            }
+            UpdateOutcome::Rejected => {
+                if t.consecutive_rejects == 0 {
+                    t.first_reject_t_ns = t_ns;
+                }
+                t.rejected += 1;
+                t.consecutive_rejects += 1;
+            }
+            UpdateOutcome::Singular => {}
+        }
+        out
+    }
+
     /// Fuses the rotation of `m`; returns the correction.
     pub fn fuse_rotation(
         &mut self,

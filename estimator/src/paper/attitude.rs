@@ -141,11 +141,14 @@ impl AttitudeEkf {
         body_from_cam: &Isometry3<f64>,
         gate: f64,
         start_sigma_rad: f64,
+        cov_scale: f64,
         diag: &mut InnovDiag,
     ) {
         let r_bc = body_from_cam.rotation;
         let b1_from_b0 = r_bc * m.cam1_from_cam0 * r_bc.inverse();
-        let rot_var = m.rot_cov.trace() / 3.0;
+        // `cov_scale`: the allowance for the egomotion errors' time correlation (see
+        // `EstimatorParams::vision_cov_scale`); the pseudo-attitude accumulates them.
+        let rot_var = m.rot_cov.trace() / 3.0 * cov_scale;
         let base = match self.pseudo {
             Some((t, q)) if t == m.t0_ns => Some(q),
             _ => {

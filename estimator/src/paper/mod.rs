@@ -308,6 +308,7 @@ impl PaperFilter {
             &bfc,
             gate,
             self.params.paper_video_start_sigma_rad,
+            self.params.vision_cov_scale,
             &mut self.health.vision_rot,
         );
         let Some(v2) = self.vio2.as_mut() else { return };
@@ -323,7 +324,11 @@ impl PaperFilter {
         };
         // Camera displacement c1 − c0 = −R_nc1 t (eq. 35's Δp, a unit vector), speed = last valid.
         let dir_n = -(c1 * bfc.rotation.to_rotation_matrix().matrix() * dir);
-        let dir_sigma = m.t_cov.trace().max(0.0).sqrt().max(1e-3);
+        // 1-σ of the direction, rad: `t_cov` is of the unit vector, or of the metric `t` (m²) when
+        // the solver knew the terrain distance.
+        let t_norm = m.t_cam1_m.map_or(1.0, |t| t.norm().max(1e-3));
+        let dir_sigma =
+            ((m.t_cov.trace().max(0.0) * self.params.vision_cov_scale).sqrt() / t_norm).max(1e-3);
         // |V| is held at the last valid value (eq. 35); the longer the outage, the less it is
         // trusted (the vehicle may have sped up or slowed down).
         let since_s = self

@@ -118,7 +118,11 @@ impl RunCfg {
             profile,
             gnss,
             vision,
-            params: EstimatorParams::default(),
+            // the oracle's errors are white: no allowance for time-correlated errors
+            params: EstimatorParams {
+                vision_cov_scale: 1.0,
+                ..EstimatorParams::default()
+            },
         }
     }
 }
