@@ -9,6 +9,12 @@
 //!     [--frames-csv F] [--frame-cache DIR]
 //! ```
 //!
+//! Calibration diagnostics (`support/calib.rs`): the vision errors against their own joint
+//! covariance per eigen-direction, their biases and time correlation, the estimator's vision NIS,
+//! attitude errors by segment and a yaw / gyro-bias / velocity-error series (`YAW_STEP_S`, 10 s).
+//! Experiment switches: `--pixel-sigma PX`, `--metric-scale-sigma REL`, `--normal-sigma-deg D`
+//! (vision solver), `--vision-cov-scale K`, `--joint` / `--separate` (estimator).
+//!
 //! `--frame-cache DIR` keeps the rendered JPEGs (`DIR/<t_ns>.jpg`) so that later runs skip the
 //! renderer; without vision no frame is rendered (the runner gets empty frames and ignores them).
 //!
@@ -29,6 +35,9 @@ use uavnav_runner::{PoseOutput, RunnerParams, VehicleRunner};
 use uavnav_sim::{Flight, Scenario};
 use uavnav_vision::{NoMeasurement, PairError, error_stats, pair_error};
 
+#[path = "support/calib.rs"]
+mod calib;
+
 struct Args {
     scenario: String,
     vision: bool,
@@ -36,6 +45,11 @@ struct Args {
     duration_s: Option<f64>,
     frames_csv: Option<String>,
     frame_cache: Option<String>,
+    pixel_sigma_px: Option<f64>,
+    vision_cov_scale: Option<f64>,
+    metric_scale_sigma: Option<f64>,
+    joint: Option<bool>,
+    normal_sigma_deg: Option<f64>,
 }
 
 fn parse_args() -> Args {
@@ -46,6 +60,11 @@ fn parse_args() -> Args {
         duration_s: None,
         frames_csv: None,
         frame_cache: None,
+        pixel_sigma_px: None,
+        vision_cov_scale: None,
+        metric_scale_sigma: None,
+        joint: None,
+        normal_sigma_deg: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -61,6 +80,14 @@ fn parse_args() -> Args {
             "--duration" => a.duration_s = it.next().and_then(|s| s.parse().ok()),
             "--frames-csv" => a.frames_csv = it.next(),
             "--frame-cache" => a.frame_cache = it.next(),
+            "--pixel-sigma" => a.pixel_sigma_px = it.next().and_then(|s| s.parse().ok()),
+            "--vision-cov-scale" => a.vision_cov_scale = it.next().and_then(|s| s.parse().ok()),
+            "--metric-scale-sigma" => {
+                a.metric_scale_sigma = it.next().and_then(|s| s.parse().ok());
+            }
+            "--joint" => a.joint = Some(true),
+            "--normal-sigma-deg" => a.normal_sigma_deg = it.next().and_then(|s| s.parse().ok()),
+            "--separate" => a.joint = Some(false),
             path => a.scenario = path.to_string(),
         }
     }
@@ -120,6 +147,7 @@ struct VisionEval {
     metric_rel_err: Vec<f64>,
     nees_joint: Vec<f64>,
     max_corr: Vec<f64>,
+    calib: calib::JointCalib,
     reasons: BTreeMap<&'static str, u64>,
     solvers: BTreeMap<String, u64>,
     csv: String,
@@ -161,6 +189,7 @@ impl VisionEval {
             if let Some(inv) = ego.joint_cov.try_inverse() {
                 self.nees_joint.push((e.transpose() * inv * e)[0]);
             }
+            self.calib.add(ego.t0_ns, &e, &ego.joint_cov, &t_true);
             let c = &ego.joint_cov;
             let corr = (0..3)
                 .flat_map(|i| (3..6).map(move |j| (i, j)))
@@ -314,10 +343,32 @@ fn main() {
 
     let mut config = flight.vehicle_config();
     config.profile = args.profile;
-    let params = RunnerParams {
+    let mut params = RunnerParams {
         use_vision: args.vision,
         ..RunnerParams::default()
     };
+    if let Some(s) = args.pixel_sigma_px {
+        params.vision.solve.pixel_sigma_px = s;
+    }
+    if let Some(s) = args.vision_cov_scale {
+        params.estimator.vision_cov_scale = s;
+    }
+    if let Some(s) = args.metric_scale_sigma {
+        params.vision.solve.metric_scale_sigma = s;
+    }
+    if let Some(d) = args.normal_sigma_deg {
+        params.vision.solve.normal_sigma_rad = d.to_radians();
+    }
+    if let Some(j) = args.joint {
+        params.estimator.vision_joint_update = j;
+    }
+    // the joint update's dimension (metric translation: 6) or rotation 3 + translation 3
+    let (nis_rot_dof, nis_trans_dof) = if params.estimator.vision_joint_update {
+        (6, 6)
+    } else {
+        (3, 3)
+    };
+    let mut nis = calib::NisTracker::new(params.estimator.gate_sigma);
     let mut runner = VehicleRunner::new(config, params, None);
     let truth_frame = LocalFrame::new(flight.origin());
 
@@ -347,13 +398,18 @@ fn main() {
         }
         events += 1;
         match out {
-            Ok(mut p) => poses.append(&mut p),
+            Ok(mut p) => {
+                for o in &p {
+                    nis.observe(o, nis_rot_dof, nis_trans_dof);
+                }
+                poses.append(&mut p);
+            }
             Err(e) => eprintln!("refused: {e}"),
         }
-        if runner.vision_stats().frames != frames_before {
-            if let Some(r) = runner.last_frame_result() {
-                eval.add(&flight, r);
-            }
+        if runner.vision_stats().frames != frames_before
+            && let Some(r) = runner.last_frame_result()
+        {
+            eval.add(&flight, r);
         }
     }
     let total_s = t_total.elapsed().as_secs_f64();
@@ -395,6 +451,28 @@ fn main() {
         );
     }
 
+    let t_first = flight.truth().first().map_or(0, |t| t.t_ns);
+    println!(
+        "{}",
+        calib::segment_errors(
+            &poses,
+            flight.truth(),
+            t_first,
+            &[(30.0, 120.0), (120.0, 240.0), (240.0, 250.0)]
+        )
+    );
+    println!(
+        "{}",
+        calib::yaw_series(
+            &poses,
+            flight.truth(),
+            t_first,
+            std::env::var("YAW_STEP_S")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(10.0)
+        )
+    );
     let h = runner.health();
     let s = runner.vision_stats();
     println!(
@@ -434,7 +512,22 @@ fn main() {
                 median(&eval.nees_joint),
                 median(&eval.max_corr)
             );
+            println!("{}", eval.calib.summary());
+            println!("{}", eval.calib.windowed_means(20.0));
+            for n in [10, 50, 200] {
+                println!("{}", eval.calib.long_run_inflation(n));
+            }
+            println!(
+                "{}",
+                eval.calib.scale_vs_height(
+                    &poses,
+                    flight.truth(),
+                    scenario.terrain.elevation_m,
+                    &truth_frame
+                )
+            );
         }
+        println!("{}", nis.summary(nis_rot_dof, nis_trans_dof));
     }
     println!(
         "time: simulate {sim_s:.2} s; runner {:.2} s wall, {:.2} s CPU on 1 thread ({} events, {} poses); total incl. frame loading {total_s:.2} s; {} cores available",
