@@ -48,9 +48,9 @@ pub struct EstimatorParams {
     /// egomotion in a stream whose errors are time-correlated. The front end's covariance is
     /// calibrated per frame (NEES ≈ dof on the simulated paper flights), but consecutive frames
     /// share ground texture and tracks: the mean of its errors over 5 s (20 s) windows varies
-    /// 2–6× (4–19×) more than white errors would, so fusing every frame at face value makes the
-    /// attitude overconfident (NEES 9.6 for 3). 6 keeps the pose NEES ≈ 3. Use 1 for an
-    /// egomotion source with white errors.
+    /// 2–3× (4–10×) more than white errors would (2–6×, 4–19× with the earlier front end), so
+    /// fusing every frame at face value makes the attitude overconfident (NEES 9.6 for 3). 6 keeps
+    /// the pose NEES ≈ 2.5–3.3. Use 1 for an egomotion source with white errors.
     pub vision_cov_scale: f64,
     /// Use vision relative rotation.
     pub use_vision_rotation: bool,
