@@ -92,6 +92,8 @@ pub(crate) enum Sink {
 #[derive(Debug, Clone)]
 pub struct IngestSender {
     sink: Sink,
+    /// Vehicles whose Zenoh key already had (or was waited for) a matching subscriber.
+    matched: Arc<Mutex<std::collections::BTreeSet<String>>>,
     seq: Arc<AtomicU64>,
     stats: Arc<IngestStats>,
 }
@@ -137,6 +139,7 @@ impl IngestSender {
             Sink::Zenoh(session) => {
                 let leaf = leaf_of(&payload);
                 let key = crate::keys::vehicle_key(vehicle_id, leaf);
+                self.await_subscriber(session, vehicle_id, &key).await;
                 let body = encode_payload(&payload);
                 let len = body.len();
                 let put = session
@@ -179,6 +182,31 @@ impl IngestSender {
     pub fn stats(&self) -> &Arc<IngestStats> {
         &self.stats
     }
+
+    /// On a vehicle's first Zenoh message: waits until the service's subscription is known, so
+    /// the start of the stream is not routed nowhere. Counted as an error when none shows up.
+    async fn await_subscriber(&self, session: &zenoh::Session, vehicle_id: &str, key: &str) {
+        let known = self
+            .matched
+            .lock()
+            .map(|m| m.contains(vehicle_id))
+            .unwrap_or(true);
+        if known {
+            return;
+        }
+        let wait = crate::zenoh_backend::SUBSCRIBER_WAIT;
+        if !crate::zenoh_backend::wait_for_subscriber(session, key, wait).await {
+            tracing::warn!(
+                key,
+                "no subscriber for this key after {wait:?}; publishing anyway"
+            );
+            self.stats
+                .error(format!("no subscriber matched {key} within {wait:?}"));
+        }
+        if let Ok(mut m) = self.matched.lock() {
+            m.insert(vehicle_id.to_string());
+        }
+    }
 }
 
 fn payload_len(p: &Payload) -> usize {
@@ -202,6 +230,7 @@ impl Ingest {
         Self {
             sender: IngestSender {
                 sink,
+                matched: Arc::default(),
                 seq: Arc::new(AtomicU64::new(0)),
                 stats,
             },

@@ -81,6 +81,34 @@ pub async fn open(
     }
 }
 
+/// How long a first put for a vehicle waits for the service's subscription to be known here.
+pub const SUBSCRIBER_WAIT: Duration = Duration::from_secs(5);
+
+/// Waits (up to `timeout`) until a subscriber matching `key` is known to this session.
+///
+/// Why: a Zenoh put goes only where matching subscriptions are known, and a session that has just
+/// connected learns the service's subscriptions a moment later; a burst published in that moment
+/// is silently routed nowhere. Returns whether a subscriber matched.
+pub async fn wait_for_subscriber(session: &Session, key: &str, timeout: Duration) -> bool {
+    let Ok(publisher) = session.declare_publisher(key.to_string()).await else {
+        return false;
+    };
+    let deadline = tokio::time::Instant::now() + timeout;
+    loop {
+        if publisher
+            .matching_status()
+            .await
+            .is_ok_and(|m| m.matching())
+        {
+            return true;
+        }
+        if tokio::time::Instant::now() >= deadline {
+            return false;
+        }
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+}
+
 /// Queries `key` and decodes every reply as `M`.
 pub async fn query<M: Message + Default>(
     session: &Session,
@@ -156,6 +184,13 @@ pub async fn configure(
     config: &pb::VehicleConfig,
 ) -> Result<(), ClientError> {
     let key = keys::vehicle_key(id, Leaf::Config);
+    if !wait_for_subscriber(session, &key, SUBSCRIBER_WAIT).await {
+        return Err(ClientError::Zenoh {
+            op: "put",
+            key,
+            reason: format!("no service subscribes to this key (waited {SUBSCRIBER_WAIT:?})"),
+        });
+    }
     session
         .put(&key, config.encode_to_vec())
         .encoding(encoding(Leaf::Config.message_name()))

@@ -168,13 +168,10 @@ impl VehicleRunner {
         origin: Option<uavnav_core::Lla>,
     ) -> Self {
         let estimator = Estimator::new(&config, params.estimator.clone(), origin);
-        let frontend = config.camera.as_ref().map(|c| {
-            Box::new(FrontEnd::new(
-                &c.model,
-                c.body_from_cam,
-                params.vision.clone(),
-            ))
-        });
+        let frontend = config
+            .camera
+            .as_ref()
+            .map(|c| Box::new(FrontEnd::new(&c.model, c.body_from_cam, params.vision)));
         Self {
             config,
             params,
@@ -221,21 +218,19 @@ impl VehicleRunner {
         self.job_deadline_ns = None;
         self.pending.clear();
         self.held.clear();
-        self.frontend = self.config.camera.as_ref().map(|c| {
-            Box::new(FrontEnd::new(
-                &c.model,
-                c.body_from_cam,
-                self.params.vision.clone(),
-            ))
-        });
+        self.frontend = self
+            .config
+            .camera
+            .as_ref()
+            .map(|c| Box::new(FrontEnd::new(&c.model, c.body_from_cam, self.params.vision)));
     }
 
     /// Pushes one event. Errors leave the runner unchanged.
     pub fn push(&mut self, event: SensorEvent) -> Result<Step, RunnerError> {
-        if let SensorEvent::Camera(f) = &event {
-            if self.config.camera.is_none() {
-                return Err(RunnerError::NoCamera { t_ns: f.t_ns });
-            }
+        if let SensorEvent::Camera(f) = &event
+            && self.config.camera.is_none()
+        {
+            return Err(RunnerError::NoCamera { t_ns: f.t_ns });
         }
         if self.must_hold(&event) {
             let mut step = Step::default();
@@ -303,18 +298,32 @@ impl VehicleRunner {
         let abandon = self.held.len() > self.params.max_held_events;
         if abandon {
             // The job is too slow: give up on it rather than ever lose IMU.
-            self.stats.abandoned += 1;
-            self.generation += 1;
-            self.job_deadline_ns = None;
-            self.frontend = self.config.camera.as_ref().map(|c| {
-                Box::new(FrontEnd::new(
-                    &c.model,
-                    c.body_from_cam,
-                    self.params.vision.clone(),
-                ))
-            });
+            self.drop_job();
         }
         abandon
+    }
+
+    /// Gives up on the vision job that is out (its result will be discarded when it comes back)
+    /// and replays the events held behind it. For a caller that lost the job (e.g. its worker
+    /// pool shut down); a no-op without a job out.
+    pub fn abandon_job(&mut self) -> Step {
+        let mut step = Step::default();
+        if self.job_deadline_ns.is_some() {
+            self.drop_job();
+            self.replay(&mut step);
+        }
+        step
+    }
+
+    fn drop_job(&mut self) {
+        self.stats.abandoned += 1;
+        self.generation += 1;
+        self.job_deadline_ns = None;
+        self.frontend = self
+            .config
+            .camera
+            .as_ref()
+            .map(|c| Box::new(FrontEnd::new(&c.model, c.body_from_cam, self.params.vision)));
     }
 
     fn replay(&mut self, step: &mut Step) {
@@ -333,10 +342,10 @@ impl VehicleRunner {
             if *deadline > t_ns {
                 break;
             }
-            if let Some((_, ego)) = self.pending.pop_front() {
-                if self.estimator.push_egomotion(&ego).is_err() {
-                    self.stats.refused += 1;
-                }
+            if let Some((_, ego)) = self.pending.pop_front()
+                && self.estimator.push_egomotion(&ego).is_err()
+            {
+                self.stats.refused += 1;
             }
         }
     }

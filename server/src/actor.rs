@@ -249,7 +249,9 @@ impl Actor {
             tokio::select! {
                 biased;
                 done = recv_vision(&mut self.pending), if self.pending.is_some() => self.on_vision(done),
-                msg = rx.recv() => match msg {
+                // While vision lags, take no input: the queue fills and senders wait (back-
+                // pressure) instead of the engine abandoning jobs, so output never depends on timing.
+                msg = rx.recv(), if !self.backlogged() => match msg {
                     Some(Msg::Stop) | None => break false,
                     Some(m) => self.on_msg(m),
                 },
@@ -286,6 +288,12 @@ impl Actor {
             }
         }
         self.publish_health();
+    }
+
+    /// Whether the engine holds so many inputs behind the outstanding vision job that the actor
+    /// should wait for the job before taking more.
+    fn backlogged(&self) -> bool {
+        self.pending.is_some() && self.engine.backlog() >= uavnav_runner::DEFAULT_MAX_HELD_EVENTS
     }
 
     fn on_msg(&mut self, msg: Msg) {
@@ -392,6 +400,12 @@ impl Actor {
                 .vision_in_flight
                 .set(self.ctx.pool.stats().in_flight as i64);
             self.pending = Some(rx);
+        } else {
+            // The pool is shutting down: the job is lost, so release what the engine held for it.
+            VehicleStats::add(&self.shared.stats.shed, 1);
+            self.ctx.metrics.vision_shed.inc();
+            let step = self.engine.abandon_job();
+            self.apply(step);
         }
     }
 

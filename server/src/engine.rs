@@ -70,6 +70,16 @@ pub trait Engine: Send + 'static {
     fn health(&self) -> EngineHealth;
     /// Forgets all state (the configuration is kept).
     fn reset(&mut self);
+    /// Inputs held behind the vision job that is out (the actor stops taking input while this is
+    /// large, so that a fast feed waits for vision instead of outrunning it).
+    fn backlog(&self) -> usize {
+        0
+    }
+    /// The vision job that is out will never come back (e.g. the pool shut down): give up on it
+    /// and release what it held.
+    fn abandon_job(&mut self) -> EngineStep {
+        EngineStep::default()
+    }
 }
 
 /// Builds engines for new vehicles and for reconfigured ones.

@@ -121,6 +121,8 @@ pub struct Metrics {
     pub engine_errors: Counter,
     /// Outputs the Zenoh publisher could not keep up with (skipped).
     pub zenoh_output_lagged: Counter,
+    /// Samples received on the Zenoh input key expressions (before decoding).
+    pub zenoh_samples: Counter,
 }
 
 impl Metrics {
@@ -140,6 +142,7 @@ impl Metrics {
         let reorder_dropped = Counter::default();
         let engine_errors = Counter::default();
         let zenoh_output_lagged = Counter::default();
+        let zenoh_samples = Counter::default();
         registry.register(
             "inputs",
             "Sensor inputs by transport, kind and outcome",
@@ -197,6 +200,11 @@ impl Metrics {
             "Outputs skipped by a lagging Zenoh publisher",
             zenoh_output_lagged.clone(),
         );
+        registry.register(
+            "zenoh_samples",
+            "Samples received on the Zenoh input key expressions, before decoding",
+            zenoh_samples.clone(),
+        );
         Self {
             registry: Arc::new(registry),
             inputs,
@@ -212,6 +220,7 @@ impl Metrics {
             reorder_dropped,
             engine_errors,
             zenoh_output_lagged,
+            zenoh_samples,
         }
     }
 

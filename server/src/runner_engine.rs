@@ -8,10 +8,28 @@ use uavnav_runner::{Health, Mode, PoseOutput, RunnerParams, Step, VehicleRunner,
 use crate::engine::{Engine, EngineError, EngineFactory, EngineHealth, EngineStep, VisionResult};
 
 /// Builds [`RunnerEngine`]s with the same parameters for every vehicle.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct RunnerFactory {
-    /// Runner parameters (defaults = those of `uavnav estimate`).
+    /// Runner parameters (those of `uavnav estimate`, except `max_held_events`, see
+    /// [`SERVICE_MAX_HELD_EVENTS`]).
     pub params: RunnerParams,
+}
+
+/// The runner's own bound on held events in the service. Far above the actor's intake limit
+/// ([`uavnav_runner::DEFAULT_MAX_HELD_EVENTS`]): the actor stops taking input at that limit and
+/// waits for the vision job instead, so the runner never abandons a job on its own and the poses
+/// are those of `uavnav estimate` whatever the feed rate. This bound only caps memory.
+pub const SERVICE_MAX_HELD_EVENTS: usize = 1 << 16;
+
+impl Default for RunnerFactory {
+    fn default() -> Self {
+        Self {
+            params: RunnerParams {
+                max_held_events: SERVICE_MAX_HELD_EVENTS,
+                ..RunnerParams::default()
+            },
+        }
+    }
 }
 
 impl EngineFactory for RunnerFactory {
@@ -92,6 +110,15 @@ impl Engine for RunnerEngine {
     fn reset(&mut self) {
         self.runner.reset();
         self.last_t_ns = 0;
+    }
+
+    fn backlog(&self) -> usize {
+        self.runner.held_events()
+    }
+
+    fn abandon_job(&mut self) -> EngineStep {
+        let step = self.runner.abandon_job();
+        self.step(step)
     }
 }
 

@@ -183,9 +183,16 @@ fn split_vehicle_key(key: &str) -> Option<(&str, &str)> {
     Some((id, leaf))
 }
 
+/// Input samples buffered between Zenoh's receive thread and the decoding shards.
+const ZENOH_INPUT_BUFFER: usize = 16_384;
+
 async fn spawn_inputs(session: &Session, ingestor: Ingestor) -> anyhow::Result<JoinHandle<()>> {
     let sub = session
         .declare_subscriber(INPUT_KEYS)
+        // Zenoh's receive thread blocks when this is full, and a link blocked for longer than
+        // Zenoh's `wait_before_close` is closed (what was queued on it is lost): keep a deep
+        // buffer between the network and the actors' back-pressure.
+        .with(zenoh::handlers::FifoChannel::new(ZENOH_INPUT_BUFFER))
         .await
         .map_err(|e| anyhow!("subscribing to {INPUT_KEYS}: {e}"))?;
     let max_bytes = ingestor.max_message_bytes();
@@ -241,6 +248,7 @@ async fn decode_loop(
             "config" => Kind::Config,
             _ => continue,
         };
+        ingestor.registry().ctx().metrics.zenoh_samples.inc();
         let bytes = sample.payload().to_bytes();
         if bytes.len() > max_bytes {
             reject(
@@ -467,8 +475,16 @@ impl Outputs {
         .await;
     }
 
+    /// Congestion control `Block`: this task alone waits for a slow link, never an actor; when it
+    /// falls behind, the broadcast it reads from lags and counts what was skipped
+    /// (`zenoh_output_lagged`), instead of Zenoh dropping samples silently.
     async fn put(&self, key: String, body: Vec<u8>, enc: &Encoding) {
-        if let Err(e) = self.session.put(&key, body).encoding(enc.clone()).await {
+        let put = self
+            .session
+            .put(&key, body)
+            .encoding(enc.clone())
+            .congestion_control(zenoh::qos::CongestionControl::Block);
+        if let Err(e) = put.await {
             debug!(key, error = %e, "zenoh put failed");
         }
     }

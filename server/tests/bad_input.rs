@@ -9,8 +9,14 @@ use prost::Message;
 use uavnav_proto::v1 as pb;
 
 fn status_of(acks: &[pb::IngestAck], seq: u64) -> (pb::IngestStatus, String) {
-    let a = acks.iter().find(|a| a.sequence == seq).unwrap_or_else(|| panic!("no ack for {seq}"));
-    (pb::IngestStatus::try_from(a.status).unwrap(), a.reason.clone())
+    let a = acks
+        .iter()
+        .find(|a| a.sequence == seq)
+        .unwrap_or_else(|| panic!("no ack for {seq}"));
+    (
+        pb::IngestStatus::try_from(a.status).unwrap(),
+        a.reason.clone(),
+    )
 }
 
 #[tokio::test]
@@ -47,7 +53,11 @@ async fn each_bad_envelope_gets_its_status_and_reason() {
         }),
         camera_env("nocam", 13, s, jpeg_header(640, 480)),
         imu_env("bad/id", 14, vec![imu(s)]),
-        pb::SensorEnvelope { vehicle_id: "cam".into(), sequence: 15, payload: None },
+        pb::SensorEnvelope {
+            vehicle_id: "cam".into(),
+            sequence: 15,
+            payload: None,
+        },
         imu_env("cam", 16, vec![imu(s + 100_000_000)]),
         imu_env("cam", 17, vec![imu(s + 1_000)]),
         camera_env("cam", 18, s + 200_000_000, jpeg_header(640, 480)),
@@ -77,13 +87,19 @@ async fn each_bad_envelope_gets_its_status_and_reason() {
     for (seq, status, needle) in expect {
         let (got, reason) = status_of(&acks, seq);
         assert_eq!(got, status, "envelope {seq}: {reason}");
-        assert!(reason.contains(needle), "envelope {seq}: reason {reason:?} lacks {needle:?}");
+        assert!(
+            reason.contains(needle),
+            "envelope {seq}: reason {reason:?} lacks {needle:?}"
+        );
     }
     // Rejections are visible in the vehicle's health.
     let reg = server.registry().clone();
     assert!(
         eventually(Duration::from_secs(3), || {
-            reg.get("cam").and_then(|h| h.shared.health()).and_then(|h| h.counters).is_some_and(|k| k.rejected >= 7)
+            reg.get("cam")
+                .and_then(|h| h.shared.health())
+                .and_then(|h| h.counters)
+                .is_some_and(|k| k.rejected >= 7)
         })
         .await
     );
@@ -116,7 +132,11 @@ impl tonic::codec::Codec for RawCodec {
 impl tonic::codec::Encoder for RawEncoder {
     type Item = Vec<u8>;
     type Error = tonic::Status;
-    fn encode(&mut self, item: Vec<u8>, dst: &mut tonic::codec::EncodeBuf<'_>) -> Result<(), tonic::Status> {
+    fn encode(
+        &mut self,
+        item: Vec<u8>,
+        dst: &mut tonic::codec::EncodeBuf<'_>,
+    ) -> Result<(), tonic::Status> {
         use bytes::BufMut;
         dst.put_slice(&item);
         Ok(())
@@ -126,12 +146,21 @@ impl tonic::codec::Encoder for RawEncoder {
 impl tonic::codec::Decoder for AckDecoder {
     type Item = pb::IngestAck;
     type Error = tonic::Status;
-    fn decode(&mut self, src: &mut tonic::codec::DecodeBuf<'_>) -> Result<Option<pb::IngestAck>, tonic::Status> {
-        pb::IngestAck::decode(src).map(Some).map_err(|e| tonic::Status::internal(e.to_string()))
+    fn decode(
+        &mut self,
+        src: &mut tonic::codec::DecodeBuf<'_>,
+    ) -> Result<Option<pb::IngestAck>, tonic::Status> {
+        pb::IngestAck::decode(src)
+            .map(Some)
+            .map_err(|e| tonic::Status::internal(e.to_string()))
     }
 }
 
-async fn raw_call(server: &uavnavd::RunningServer, path: &'static str, bodies: Vec<Vec<u8>>) -> tonic::Status {
+async fn raw_call(
+    server: &uavnavd::RunningServer,
+    path: &'static str,
+    bodies: Vec<Vec<u8>>,
+) -> tonic::Status {
     let channel = tonic::transport::Endpoint::from_shared(format!("http://{}", server.grpc_addr))
         .unwrap()
         .connect()
@@ -195,7 +224,10 @@ async fn malformed_unary_request_is_invalid_argument() {
         }
     }
     let path = tonic::codegen::http::uri::PathAndQuery::from_static("/uavnav.v1.UavNav/GetPose");
-    let status = grpc.unary(tonic::Request::new(vec![0x0A, 0xFF, 0x01]), path, PoseCodec).await.unwrap_err();
+    let status = grpc
+        .unary(tonic::Request::new(vec![0x0A, 0xFF, 0x01]), path, PoseCodec)
+        .await
+        .unwrap_err();
     assert_eq!(status.code(), tonic::Code::InvalidArgument, "{status:?}");
     server.shutdown().await.unwrap();
 }
@@ -211,7 +243,12 @@ async fn oversize_message_is_resource_exhausted() {
         d.resize(9 << 20, 0);
         c.image.as_mut().unwrap().data = d.into();
     }
-    let status = raw_call(&server, "/uavnav.v1.UavNav/Ingest", vec![env.encode_to_vec()]).await;
+    let status = raw_call(
+        &server,
+        "/uavnav.v1.UavNav/Ingest",
+        vec![env.encode_to_vec()],
+    )
+    .await;
     assert_eq!(status.code(), tonic::Code::ResourceExhausted, "{status:?}");
     server.shutdown().await.unwrap();
 }
@@ -223,20 +260,47 @@ async fn unary_calls_name_the_problem() {
     let mut cfg = vehicle_config(true);
     cfg.camera.as_mut().unwrap().fx_px = -1.0;
     let st = c
-        .configure_vehicle(pb::ConfigureVehicleRequest { vehicle_id: "v".into(), config: Some(cfg) })
+        .configure_vehicle(pb::ConfigureVehicleRequest {
+            vehicle_id: "v".into(),
+            config: Some(cfg),
+        })
         .await
         .unwrap_err();
     assert_eq!(st.code(), tonic::Code::InvalidArgument);
     assert!(st.message().contains("config.camera.fx_px"), "{st:?}");
-    let st = c.configure_vehicle(pb::ConfigureVehicleRequest { vehicle_id: "v".into(), config: None }).await.unwrap_err();
+    let st = c
+        .configure_vehicle(pb::ConfigureVehicleRequest {
+            vehicle_id: "v".into(),
+            config: None,
+        })
+        .await
+        .unwrap_err();
     assert_eq!(st.code(), tonic::Code::InvalidArgument);
-    let st = c.get_pose(pb::GetPoseRequest { vehicle_id: "nobody".into() }).await.unwrap_err();
+    let st = c
+        .get_pose(pb::GetPoseRequest {
+            vehicle_id: "nobody".into(),
+        })
+        .await
+        .unwrap_err();
     assert_eq!(st.code(), tonic::Code::NotFound);
-    let st = c.get_pose(pb::GetPoseRequest { vehicle_id: "a b".into() }).await.unwrap_err();
+    let st = c
+        .get_pose(pb::GetPoseRequest {
+            vehicle_id: "a b".into(),
+        })
+        .await
+        .unwrap_err();
     assert_eq!(st.code(), tonic::Code::InvalidArgument);
-    let st = c.reset_vehicle(pb::ResetVehicleRequest { vehicle_id: "nobody".into() }).await.unwrap_err();
+    let st = c
+        .reset_vehicle(pb::ResetVehicleRequest {
+            vehicle_id: "nobody".into(),
+        })
+        .await
+        .unwrap_err();
     assert_eq!(st.code(), tonic::Code::NotFound);
-    let st = c.watch_poses(pb::WatchRequest::default()).await.unwrap_err();
+    let st = c
+        .watch_poses(pb::WatchRequest::default())
+        .await
+        .unwrap_err();
     assert_eq!(st.code(), tonic::Code::InvalidArgument);
     server.shutdown().await.unwrap();
 }
@@ -249,11 +313,20 @@ async fn vehicle_limit_is_resource_exhausted() {
     let mut c = client(&server).await;
     let acks = ingest(
         &mut c,
-        vec![imu_env("a", 1, vec![imu(1)]), imu_env("b", 2, vec![imu(1)]), imu_env("c", 3, vec![imu(1)])],
+        vec![
+            imu_env("a", 1, vec![imu(1)]),
+            imu_env("b", 2, vec![imu(1)]),
+            imu_env("c", 3, vec![imu(1)]),
+        ],
     )
     .await
     .unwrap();
-    assert_eq!(acks[2].status, pb::IngestStatus::ResourceExhausted as i32, "{:?}", acks[2]);
+    assert_eq!(
+        acks[2].status,
+        pb::IngestStatus::ResourceExhausted as i32,
+        "{:?}",
+        acks[2]
+    );
     assert!(acks[2].reason.contains("vehicle limit"));
     server.shutdown().await.unwrap();
 }

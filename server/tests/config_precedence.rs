@@ -6,8 +6,11 @@ use std::io::Write;
 use uavnavd::Config;
 use uavnavd::config::{ConfigError, ZenohMode};
 
-fn env(pairs: &[(&str, &str)]) -> impl Fn(&str) -> Option<String> {
-    let m: HashMap<String, String> = pairs.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
+fn env(pairs: &[(&str, &str)]) -> impl Fn(&str) -> Option<String> + use<> {
+    let m: HashMap<String, String> = pairs
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
     move |k| m.get(k).cloned()
 }
 
@@ -33,7 +36,11 @@ fn file_then_env_then_flags() {
     assert_eq!(c.zenoh.mode, ZenohMode::Client);
     assert_eq!(c.vehicles.idle_evict_s, 5.0);
     // Environment over the file (UAVNAV_CONFIG names the file too).
-    let e = env(&[("UAVNAV_CONFIG", &path), ("UAVNAV_GRPC_ADDR", "127.0.0.1:1001"), ("UAVNAV_ZENOH_MODE", "router")]);
+    let e = env(&[
+        ("UAVNAV_CONFIG", &path),
+        ("UAVNAV_GRPC_ADDR", "127.0.0.1:1001"),
+        ("UAVNAV_ZENOH_MODE", "router"),
+    ]);
     let c = Config::load(["uavnavd"], &e).unwrap();
     assert_eq!(c.grpc.addr.port(), 1001);
     assert_eq!(c.http.addr.port(), 2000, "file value kept");
@@ -63,7 +70,10 @@ fn file_then_env_then_flags() {
     assert_eq!(c.zenoh.mode, ZenohMode::Peer);
     assert_eq!(c.zenoh.listen, vec!["tcp/127.0.0.1:1", "udp/127.0.0.1:2"]);
     assert_eq!(c.zenoh.connect, vec!["tcp/127.0.0.1:3"]);
-    assert_eq!(c.zenoh.config_file.as_deref(), Some(std::path::Path::new("/z.json5")));
+    assert_eq!(
+        c.zenoh.config_file.as_deref(),
+        Some(std::path::Path::new("/z.json5"))
+    );
     assert!(!c.zenoh.enabled);
     assert_eq!(c.http.addr.port(), 2000);
 }
@@ -72,13 +82,21 @@ fn file_then_env_then_flags() {
 fn unknown_keys_and_bad_values_are_named() {
     let mut f = tempfile::NamedTempFile::new().unwrap();
     writeln!(f, "[vehicles]\nreorder_windw_ms = 5.0").unwrap();
-    let err = Config::load(["uavnavd", "--config", f.path().to_str().unwrap()], env(&[])).unwrap_err();
+    let err = Config::load(
+        ["uavnavd", "--config", f.path().to_str().unwrap()],
+        env(&[]),
+    )
+    .unwrap_err();
     assert!(matches!(err, ConfigError::Parse { .. }));
     assert!(err.to_string().contains("reorder_windw_ms"), "{err}");
 
     let mut f = tempfile::NamedTempFile::new().unwrap();
     writeln!(f, "[nonsense]\nx = 1").unwrap();
-    let err = Config::load(["uavnavd", "--config", f.path().to_str().unwrap()], env(&[])).unwrap_err();
+    let err = Config::load(
+        ["uavnavd", "--config", f.path().to_str().unwrap()],
+        env(&[]),
+    )
+    .unwrap_err();
     assert!(err.to_string().contains("nonsense"), "{err}");
 
     let err = Config::load(["uavnavd"], env(&[("UAVNAV_ZENOH_MODE", "mesh")])).unwrap_err();

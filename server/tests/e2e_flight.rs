@@ -16,7 +16,11 @@ use uavnavd::runner_engine::pose_to_wire;
 
 /// The first `seconds` of the smoke flight, every sensor, in time order.
 fn flight(seconds: f64) -> (uavnav_core::VehicleConfig, Vec<SensorEvent>) {
-    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios/smoke.toml")).unwrap();
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../scenarios/smoke.toml"
+    ))
+    .unwrap();
     let scenario = uavnav_sim::scenario::Scenario::from_toml_str(&text).unwrap();
     let flight = uavnav_sim::flight::Flight::new(&scenario).unwrap();
     let mut events = Vec::new();
@@ -46,11 +50,17 @@ fn offline(config: &uavnav_core::VehicleConfig, events: &[SensorEvent]) -> Vec<p
 fn envelope(id: &str, seq: u64, e: &SensorEvent) -> pb::SensorEnvelope {
     use pb::sensor_envelope::Payload as P;
     let payload = match e {
-        SensorEvent::Imu(s) => P::Imu(pb::ImuBatch { samples: vec![s.into()] }),
+        SensorEvent::Imu(s) => P::Imu(pb::ImuBatch {
+            samples: vec![s.into()],
+        }),
         SensorEvent::Gnss(f) => P::Gnss(f.into()),
         SensorEvent::Camera(c) => P::Camera(c.into()),
     };
-    pb::SensorEnvelope { vehicle_id: id.into(), sequence: seq, payload: Some(payload) }
+    pb::SensorEnvelope {
+        vehicle_id: id.into(),
+        sequence: seq,
+        payload: Some(payload),
+    }
 }
 
 fn strip(mut p: pb::PoseEstimate) -> pb::PoseEstimate {
@@ -69,7 +79,9 @@ async fn collect(
             got.push(strip((*rx.recv().await.unwrap()).clone()));
         }
     };
-    tokio::time::timeout(Duration::from_secs(60), all).await.expect("all poses within 60 s");
+    tokio::time::timeout(Duration::from_secs(60), all)
+        .await
+        .expect("all poses within 60 s");
     got
 }
 
@@ -84,17 +96,32 @@ fn assert_same(got: &[pb::PoseEstimate], want: &[pb::PoseEstimate]) {
 async fn grpc_flight_equals_offline_estimate() {
     let (config, events) = flight(4.0);
     let want = offline(&config, &events);
-    assert!(want.len() > 500, "the offline run produced {} poses", want.len());
+    assert!(
+        want.len() > 500,
+        "the offline run produced {} poses",
+        want.len()
+    );
 
     let server = Server::start(test_config()).await.unwrap();
     let mut rx = server.registry().ctx().hub.poses.subscribe();
     let mut c = common::client(&server).await;
-    c.configure_vehicle(pb::ConfigureVehicleRequest { vehicle_id: "e2e".into(), config: Some((&config).into()) })
-        .await
-        .unwrap();
-    let envs: Vec<_> = events.iter().enumerate().map(|(i, e)| envelope("e2e", i as u64, e)).collect();
+    c.configure_vehicle(pb::ConfigureVehicleRequest {
+        vehicle_id: "e2e".into(),
+        config: Some((&config).into()),
+    })
+    .await
+    .unwrap();
+    let envs: Vec<_> = events
+        .iter()
+        .enumerate()
+        .map(|(i, e)| envelope("e2e", i as u64, e))
+        .collect();
     let n = envs.len();
-    let mut acks = c.ingest(futures::stream::iter(envs)).await.unwrap().into_inner();
+    let mut acks = c
+        .ingest(futures::stream::iter(envs))
+        .await
+        .unwrap()
+        .into_inner();
     let mut accepted = 0;
     while let Some(a) = acks.message().await.unwrap() {
         assert_eq!(a.status, pb::IngestStatus::Accepted as i32, "{a:?}");
@@ -112,7 +139,11 @@ async fn grpc_flight_equals_offline_estimate() {
 async fn zenoh_flight_equals_offline_estimate() {
     let (config, events) = flight(2.0);
     let want = offline(&config, &events);
-    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let mut cfg = test_config();
     cfg.zenoh.enabled = true;
@@ -124,22 +155,47 @@ async fn zenoh_flight_equals_offline_estimate() {
     let mut zc = zenoh::Config::default();
     zc.insert_json5("mode", "\"peer\"").unwrap();
     zc.insert_json5("listen/endpoints", "[]").unwrap();
-    zc.insert_json5("connect/endpoints", &format!("[\"{endpoint}\"]")).unwrap();
-    zc.insert_json5("scouting/multicast/enabled", "false").unwrap();
+    zc.insert_json5("connect/endpoints", &format!("[\"{endpoint}\"]"))
+        .unwrap();
+    zc.insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
     let z = zenoh::open(zc).await.unwrap();
     tokio::time::sleep(Duration::from_millis(500)).await;
     let key = |leaf: &str| format!("uavnav/v1/vehicle/ze2e/{leaf}");
     let enc = uavnavd::zenoh_io::encoding;
     let block = zenoh::qos::CongestionControl::Block;
     let cfg_msg = pb::VehicleConfig::from(&config);
-    z.put(key("config"), cfg_msg.encode_to_vec()).encoding(enc("uavnav.v1.VehicleConfig")).congestion_control(block).await.unwrap();
+    z.put(key("config"), cfg_msg.encode_to_vec())
+        .encoding(enc("uavnav.v1.VehicleConfig"))
+        .congestion_control(block)
+        .await
+        .unwrap();
     for e in &events {
         let (leaf, body, name) = match e {
-            SensorEvent::Imu(s) => ("imu", pb::ImuBatch { samples: vec![s.into()] }.encode_to_vec(), "uavnav.v1.ImuBatch"),
-            SensorEvent::Gnss(f) => ("gnss", pb::GnssFix::from(f).encode_to_vec(), "uavnav.v1.GnssFix"),
-            SensorEvent::Camera(f) => ("camera", pb::CameraFrame::from(f).encode_to_vec(), "uavnav.v1.CameraFrame"),
+            SensorEvent::Imu(s) => (
+                "imu",
+                pb::ImuBatch {
+                    samples: vec![s.into()],
+                }
+                .encode_to_vec(),
+                "uavnav.v1.ImuBatch",
+            ),
+            SensorEvent::Gnss(f) => (
+                "gnss",
+                pb::GnssFix::from(f).encode_to_vec(),
+                "uavnav.v1.GnssFix",
+            ),
+            SensorEvent::Camera(f) => (
+                "camera",
+                pb::CameraFrame::from(f).encode_to_vec(),
+                "uavnav.v1.CameraFrame",
+            ),
         };
-        z.put(key(leaf), body).encoding(enc(name)).congestion_control(block).await.unwrap();
+        z.put(key(leaf), body)
+            .encoding(enc(name))
+            .congestion_control(block)
+            .await
+            .unwrap();
     }
     let got = collect(&mut rx, want.len()).await;
     assert_same(&got, &want);

@@ -13,15 +13,21 @@ use uavnav_proto::v1 as pb;
 use zenoh::Wait;
 
 fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
 }
 
 async fn peer(connect: &str) -> zenoh::Session {
     let mut c = zenoh::Config::default();
     c.insert_json5("mode", "\"peer\"").unwrap();
     c.insert_json5("listen/endpoints", "[]").unwrap();
-    c.insert_json5("connect/endpoints", &format!("[\"{connect}\"]")).unwrap();
-    c.insert_json5("scouting/multicast/enabled", "false").unwrap();
+    c.insert_json5("connect/endpoints", &format!("[\"{connect}\"]"))
+        .unwrap();
+    c.insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
     zenoh::open(c).await.unwrap()
 }
 
@@ -39,35 +45,71 @@ async fn zenoh_round_trip() {
     cfg.zenoh.instance = format!("test-{port}");
     let server = start(cfg).await;
     let z = peer(&endpoint).await;
-    let poses = z.declare_subscriber("uavnav/v1/vehicle/zv/pose").await.unwrap();
-    let health = z.declare_subscriber("uavnav/v1/vehicle/zv/health").await.unwrap();
+    let poses = z
+        .declare_subscriber("uavnav/v1/vehicle/zv/pose")
+        .await
+        .unwrap();
+    let health = z
+        .declare_subscriber("uavnav/v1/vehicle/zv/health")
+        .await
+        .unwrap();
     // Let the subscriptions propagate to the service.
     tokio::time::sleep(Duration::from_millis(500)).await;
-    let alive = z.liveliness().get(format!("uavnav/v1/service/test-{port}")).await.unwrap();
-    assert!(tokio::time::timeout(Duration::from_secs(3), alive.recv_async()).await.unwrap().is_ok(), "service token");
+    let alive = z
+        .liveliness()
+        .get(format!("uavnav/v1/service/test-{port}"))
+        .await
+        .unwrap();
+    assert!(
+        tokio::time::timeout(Duration::from_secs(3), alive.recv_async())
+            .await
+            .unwrap()
+            .is_ok(),
+        "service token"
+    );
 
     let key = |leaf: &str| format!("uavnav/v1/vehicle/zv/{leaf}");
-    z.put(key("config"), vehicle_config(false).encode_to_vec()).encoding(enc("uavnav.v1.VehicleConfig")).await.unwrap();
-    z.put(key("gnss"), fix(1_000).encode_to_vec()).encoding(enc("uavnav.v1.GnssFix")).await.unwrap();
+    z.put(key("config"), vehicle_config(false).encode_to_vec())
+        .encoding(enc("uavnav.v1.VehicleConfig"))
+        .await
+        .unwrap();
+    z.put(key("gnss"), fix(1_000).encode_to_vec())
+        .encoding(enc("uavnav.v1.GnssFix"))
+        .await
+        .unwrap();
     let n = 20;
     for k in 0..n {
-        let batch = pb::ImuBatch { samples: vec![imu(2_000 + k * 5_000_000)] };
-        z.put(key("imu"), batch.encode_to_vec()).encoding(enc("uavnav.v1.ImuBatch")).await.unwrap();
+        let batch = pb::ImuBatch {
+            samples: vec![imu(2_000 + k * 5_000_000)],
+        };
+        z.put(key("imu"), batch.encode_to_vec())
+            .encoding(enc("uavnav.v1.ImuBatch"))
+            .await
+            .unwrap();
     }
     // Garbage on an input key is counted, not fatal.
     z.put(key("imu"), vec![0x0A, 0xFF, 0x01]).wait().unwrap();
 
     let mut got = Vec::new();
     while got.len() < n as usize {
-        let s = tokio::time::timeout(Duration::from_secs(5), poses.recv_async()).await.expect("pose over zenoh").unwrap();
+        let s = tokio::time::timeout(Duration::from_secs(5), poses.recv_async())
+            .await
+            .expect("pose over zenoh")
+            .unwrap();
         assert_eq!(s.encoding(), &enc("uavnav.v1.PoseEstimate"));
         let p = pb::PoseEstimate::decode(&*s.payload().to_bytes()).unwrap();
         assert_eq!(p.vehicle_id, "zv");
         got.push(p.t_ns);
     }
-    assert_eq!(got, (0..n).map(|k| 2_000 + k * 5_000_000).collect::<Vec<_>>());
+    assert_eq!(
+        got,
+        (0..n).map(|k| 2_000 + k * 5_000_000).collect::<Vec<_>>()
+    );
 
-    let h = tokio::time::timeout(Duration::from_secs(3), health.recv_async()).await.unwrap().unwrap();
+    let h = tokio::time::timeout(Duration::from_secs(3), health.recv_async())
+        .await
+        .unwrap()
+        .unwrap();
     assert_eq!(h.encoding(), &enc("uavnav.v1.VehicleHealth"));
     let h = pb::VehicleHealth::decode(&*h.payload().to_bytes()).unwrap();
     assert_eq!(h.vehicle_id, "zv");
@@ -76,28 +118,70 @@ async fn zenoh_round_trip() {
     let reg = server.registry().clone();
     assert!(
         eventually(Duration::from_secs(3), || {
-            reg.get("zv").and_then(|v| v.shared.health()).and_then(|h| h.counters).is_some_and(|c| c.rejected == 1)
+            reg.get("zv")
+                .and_then(|v| v.shared.health())
+                .and_then(|h| h.counters)
+                .is_some_and(|c| c.rejected == 1)
         })
         .await
     );
-    assert!(server.metrics().encode().contains("transport=\"zenoh\",kind=\"imu\",outcome=\"invalid\""));
+    assert!(
+        server
+            .metrics()
+            .encode()
+            .contains("transport=\"zenoh\",kind=\"imu\",outcome=\"invalid\"")
+    );
 
     // Queryables.
     let replies = z.get("uavnav/v1/vehicle/zv/pose/latest").await.unwrap();
-    let r = tokio::time::timeout(Duration::from_secs(3), replies.recv_async()).await.unwrap().unwrap();
+    let r = tokio::time::timeout(Duration::from_secs(3), replies.recv_async())
+        .await
+        .unwrap()
+        .unwrap();
     let s = r.result().unwrap();
     assert_eq!(s.encoding(), &enc("uavnav.v1.PoseEstimate"));
-    assert_eq!(pb::PoseEstimate::decode(&*s.payload().to_bytes()).unwrap().t_ns, 2_000 + (n - 1) * 5_000_000);
+    assert_eq!(
+        pb::PoseEstimate::decode(&*s.payload().to_bytes())
+            .unwrap()
+            .t_ns,
+        2_000 + (n - 1) * 5_000_000
+    );
     let replies = z.get("uavnav/v1/vehicles").await.unwrap();
-    let r = tokio::time::timeout(Duration::from_secs(3), replies.recv_async()).await.unwrap().unwrap();
-    let list = pb::ListVehiclesResponse::decode(&*r.result().unwrap().payload().to_bytes()).unwrap();
-    assert_eq!(list.vehicles.iter().map(|v| v.vehicle_id.as_str()).collect::<Vec<_>>(), ["zv"]);
-    let alive = z.liveliness().get("uavnav/v1/vehicle/zv/alive").await.unwrap();
-    assert!(tokio::time::timeout(Duration::from_secs(3), alive.recv_async()).await.unwrap().is_ok(), "vehicle token");
+    let r = tokio::time::timeout(Duration::from_secs(3), replies.recv_async())
+        .await
+        .unwrap()
+        .unwrap();
+    let list =
+        pb::ListVehiclesResponse::decode(&*r.result().unwrap().payload().to_bytes()).unwrap();
+    assert_eq!(
+        list.vehicles
+            .iter()
+            .map(|v| v.vehicle_id.as_str())
+            .collect::<Vec<_>>(),
+        ["zv"]
+    );
+    let alive = z
+        .liveliness()
+        .get("uavnav/v1/vehicle/zv/alive")
+        .await
+        .unwrap();
+    assert!(
+        tokio::time::timeout(Duration::from_secs(3), alive.recv_async())
+            .await
+            .unwrap()
+            .is_ok(),
+        "vehicle token"
+    );
 
     // The same vehicle is visible over gRPC.
     let mut c = client(&server).await;
-    let p = c.get_pose(pb::GetPoseRequest { vehicle_id: "zv".into() }).await.unwrap().into_inner();
+    let p = c
+        .get_pose(pb::GetPoseRequest {
+            vehicle_id: "zv".into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
     assert_eq!(p.t_ns, 2_000 + (n - 1) * 5_000_000);
 
     z.close().await.unwrap();

@@ -34,7 +34,12 @@ impl Engine for EchoEngine {
                     altitude_m: f.alt_m,
                 });
                 let mode = self.mode();
-                step.poses.push(pb::PoseEstimate { t_ns: s.t_ns, position, mode: mode as i32, ..Default::default() });
+                step.poses.push(pb::PoseEstimate {
+                    t_ns: s.t_ns,
+                    position,
+                    mode: mode as i32,
+                    ..Default::default()
+                });
             }
             SensorEvent::Gnss(f) => self.last_fix = Some(f),
             SensorEvent::Camera(frame) => {
@@ -59,7 +64,10 @@ impl Engine for EchoEngine {
         EngineHealth {
             mode: self.mode(),
             t_ns: self.t_ns,
-            vision: (self.frames > 0).then_some(pb::VisionQuality { tracked: self.frames, ..Default::default() }),
+            vision: (self.frames > 0).then_some(pb::VisionQuality {
+                tracked: self.frames,
+                ..Default::default()
+            }),
             ..EngineHealth::default()
         }
     }
@@ -71,7 +79,11 @@ impl Engine for EchoEngine {
 
 impl EchoEngine {
     fn mode(&self) -> pb::EstimatorMode {
-        if self.last_fix.is_some() { pb::EstimatorMode::Nominal } else { pb::EstimatorMode::Initialising }
+        if self.last_fix.is_some() {
+            pb::EstimatorMode::Nominal
+        } else {
+            pb::EstimatorMode::Initialising
+        }
     }
 }
 
@@ -99,7 +111,9 @@ pub fn test_config() -> Config {
 
 /// Starts the service with the echo engine.
 pub async fn start(config: Config) -> RunningServer {
-    Server::start_with(config, Arc::new(EchoFactory)).await.unwrap()
+    Server::start_with(config, Arc::new(EchoFactory))
+        .await
+        .unwrap()
 }
 
 /// A gRPC client of the server.
@@ -113,7 +127,11 @@ pub async fn client(server: &RunningServer) -> UavNavClient<tonic::transport::Ch
 
 /// A level IMU sample at `t_ns`.
 pub fn imu(t_ns: i64) -> pb::ImuSample {
-    pb::ImuSample { t_ns, accel_z_mps2: -9.81, ..Default::default() }
+    pb::ImuSample {
+        t_ns,
+        accel_z_mps2: -9.81,
+        ..Default::default()
+    }
 }
 
 /// An IMU envelope.
@@ -143,7 +161,11 @@ pub fn fix(t_ns: i64) -> pb::GnssFix {
 
 /// A GNSS envelope.
 pub fn gnss_env(id: &str, seq: u64, f: pb::GnssFix) -> pb::SensorEnvelope {
-    pb::SensorEnvelope { vehicle_id: id.into(), sequence: seq, payload: Some(pb::sensor_envelope::Payload::Gnss(f)) }
+    pb::SensorEnvelope {
+        vehicle_id: id.into(),
+        sequence: seq,
+        payload: Some(pb::sensor_envelope::Payload::Gnss(f)),
+    }
 }
 
 /// A vehicle configuration, with a 640x480 camera when `camera`.
@@ -156,7 +178,10 @@ pub fn vehicle_config(camera: bool) -> pb::VehicleConfig {
             accel_noise_density: 1e-3,
             accel_random_walk: 1e-4,
         }),
-        gnss: Some(pb::GnssConfig { rate_hz: 5.0, lever_arm_body_m: Some(pb::Vector3::default()) }),
+        gnss: Some(pb::GnssConfig {
+            rate_hz: 5.0,
+            lever_arm_body_m: Some(pb::Vector3::default()),
+        }),
         camera: camera.then(|| pb::CameraConfig {
             camera_id: 0,
             rate_hz: 10.0,
@@ -168,7 +193,10 @@ pub fn vehicle_config(camera: bool) -> pb::VehicleConfig {
             cy_px: 240.0,
             distortion_model: pb::DistortionModel::None as i32,
             body_from_cam: Some(pb::RigidTransform {
-                rotation: Some(pb::Quaternion { w: 1.0, ..Default::default() }),
+                rotation: Some(pb::Quaternion {
+                    w: 1.0,
+                    ..Default::default()
+                }),
                 translation_m: Some(pb::Vector3::default()),
             }),
             ..Default::default()
@@ -220,7 +248,10 @@ pub async fn ingest(
     envelopes: Vec<pb::SensorEnvelope>,
 ) -> Result<Vec<pb::IngestAck>, tonic::Status> {
     let n = envelopes.len();
-    let mut stream = client.ingest(futures::stream::iter(envelopes)).await?.into_inner();
+    let mut stream = client
+        .ingest(futures::stream::iter(envelopes))
+        .await?
+        .into_inner();
     let mut acks = Vec::with_capacity(n);
     while let Some(ack) = stream.message().await? {
         acks.push(ack);

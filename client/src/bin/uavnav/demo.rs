@@ -1,7 +1,7 @@
 //! `uavnav demo`: the main job on a fresh machine, with nothing to start by hand.
 //!
 //! Starts an in-process `uavnavd` (gRPC and an embedded Zenoh peer on loopback), simulates a short
-//! flight, streams it in twice — as vehicle `demo-grpc` over gRPC and as `demo-zenoh` over Zenoh —,
+//! flight, streams it in twice at `--speed` times real time — as vehicle `demo-grpc` over gRPC and as `demo-zenoh` over Zenoh —,
 //! watches the poses over gRPC, runs the same data offline (what `uavnav estimate` does), and
 //! prints an accuracy table against the simulator's truth plus the largest difference between the
 //! service's poses and the offline ones (zero: the service is deterministic).
@@ -34,6 +34,10 @@ pub struct Args {
     /// Give up waiting for the service's poses after this many seconds.
     #[arg(long, default_value_t = 120.0)]
     pub timeout_s: f64,
+    /// Feed speed (1 = real time). The service sheds camera frames when it is fed faster than it
+    /// can run vision (an overload, counted in health); the default stays well inside its budget.
+    #[arg(long, default_value_t = 2.0)]
+    pub speed: f64,
 }
 
 /// Runs the command.
@@ -46,6 +50,12 @@ pub fn run(args: Args) -> CliResult {
 }
 
 async fn demo(args: Args) -> CliResult {
+    if !(args.speed > 0.0 && args.speed.is_finite()) {
+        return Err(CliError::input(anyhow::anyhow!(
+            "--speed must be a positive number, not {}",
+            args.speed
+        )));
+    }
     let scenario = match &args.scenario {
         Some(p) => crate::simulate::load_scenario(p)?,
         None => Scenario::from_toml_str(SMOKE)
@@ -93,7 +103,8 @@ async fn demo(args: Args) -> CliResult {
     );
     let feeds = [(grpc, VEHICLES[0]), (zenoh, VEHICLES[1])].map(|(client, id)| {
         let msgs = messages.clone();
-        tokio::spawn(async move { feed(client, id, msgs).await })
+        let speed = args.speed;
+        tokio::spawn(async move { feed(client, id, msgs, speed).await })
     });
     let last_imu_t = events
         .iter()
@@ -146,12 +157,16 @@ async fn feed(
     client: Client,
     id: &'static str,
     msgs: Vec<schedule::TimedMessage>,
+    speed: f64,
 ) -> anyhow::Result<()> {
     let ingest = client
         .ingest()
         .await
         .with_context(|| format!("opening the ingest stream for {id}"))?;
+    let start = tokio::time::Instant::now();
     for m in msgs {
+        let due = Duration::from_secs_f64(m.offset_ns.max(0) as f64 * 1e-9 / speed);
+        tokio::time::sleep_until(start + due).await;
         ingest
             .send(id, m.payload)
             .await
