@@ -284,6 +284,13 @@ impl LoadOutcome {
                 self.sent, self.scheduled
             ));
         }
+        // Shedding camera frames is the service's own overload signal: not sustained.
+        if self.service.shed > 0 {
+            out.push(format!(
+                "the service shed {} camera frames (vision overloaded)",
+                self.service.shed
+            ));
+        }
         let rate = self.error_rate();
         if rate > t.max_error_rate {
             out.push(format!("error rate {:.4} > {:.4}", rate, t.max_error_rate));

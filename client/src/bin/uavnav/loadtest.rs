@@ -5,7 +5,8 @@
 //! recording) under its own id, starting at a staggered offset. Latency is ingest-to-pose from each
 //! message's scheduled send time (coordinated-omission correct, HDR histogram); see
 //! `uavnav_client::load`. `--to discard` measures the generator alone. Exit 3 when the service
-//! falls behind real time or errors pass the threshold; `--ramp` doubles N from `--vehicles` until
+//! falls behind real time (latency, send lag, or any camera frame shed by the service) or errors
+//! pass the threshold; `--ramp` doubles N from `--vehicles` until
 //! it falls behind, bisects, and reports the largest N sustained.
 
 use std::path::PathBuf;
