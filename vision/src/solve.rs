@@ -18,12 +18,14 @@ use uavnav_core::{EgomotionSolver, MotionPrior};
 
 use crate::NoMeasurement;
 use crate::essential::{
-    best_factorization, covariance_h, eight_point, propagate_to_motion, refine_sampson, sampson_sq,
+    best_factorization, covariance_h, eight_point, propagate_to_motion, refine_sampson_robust,
+    sampson_sq,
 };
 use crate::plane::{GroundPlane, refine_plane, transfer_err_sq};
 use crate::robust::{
-    RansacParams, ransac_essential, ransac_plane, ransac_rotation, rotation_err_sq,
+    HISTORY, RansacParams, ransac_essential, ransac_plane, ransac_rotation, rotation_err_sq,
 };
+use uavnav_core::rotation::skew;
 
 /// Which solver to use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -140,6 +142,8 @@ pub struct SolveScratch {
     pub inliers: Vec<usize>,
     tmp: Vec<usize>,
     errs: Vec<f64>,
+    /// Successive RANSAC bests of the essential solver.
+    cands: Vec<Matrix3<f64>>,
 }
 
 /// Solves the egomotion for correspondences `x0[i] ↔ x1[i]` (normalized, undistorted).
@@ -360,28 +364,42 @@ fn essential_solve(
     rng: &mut Rng,
     s: &mut SolveScratch,
 ) -> Result<Solution, NoMeasurement> {
-    let Some(_) = ransac_essential(x0, x1, r_prior, rp, rng, &mut s.inliers, &mut s.tmp) else {
+    let thr2 = rp.threshold * rp.threshold;
+    let found = ransac_essential(
+        x0,
+        x1,
+        r_prior,
+        rp,
+        rng,
+        &mut s.inliers,
+        &mut s.tmp,
+        &mut s.cands,
+    );
+    if found.is_none() {
         return Err(NoMeasurement::Degenerate("essential matrix: no consensus"));
-    };
+    }
     if s.inliers.len() < p.min_inliers {
         return Err(NoMeasurement::TooFewInliers {
             inliers: s.inliers.len() as u32,
         });
     }
-    // The paper's estimate on all inliers (eqs. 13–17), its factorization (18–20) and covariance.
-    let ep = eight_point(x0, x1, &s.inliers).ok_or(NoMeasurement::Degenerate("8-point failed"))?;
-    let e = ep.essential();
-    let (r_lin, t_lin, votes) = best_factorization(&e, x0, x1, &s.inliers);
-    if votes * 2 < s.inliers.len() {
-        return Err(NoMeasurement::Degenerate(
-            "cheirality: no factorization has most points in front",
-        ));
-    }
-    let (r, t) = if p.refine_iterations > 0 {
-        refine_sampson(&r_lin, &t_lin, x0, x1, &s.inliers, p.refine_iterations)
-    } else {
+    let (r, t) = if p.refine_iterations == 0 {
+        let ep =
+            eight_point(x0, x1, &s.inliers).ok_or(NoMeasurement::Degenerate("8-point failed"))?;
+        let (r_lin, t_lin, votes) = best_factorization(&ep.essential(), x0, x1, &s.inliers);
+        if votes * 2 < s.inliers.len() {
+            return Err(NoMeasurement::Degenerate(
+                "cheirality: no factorization has most points in front",
+            ));
+        }
         (r_lin, t_lin)
+    } else {
+        refine_candidates(x0, x1, p, thr2, sigma_floor, s)?
     };
+    // The paper's linear estimate (eqs. 13–17) and factorization (18–20) on the final inliers
+    // give the covariance (IV-D); the reported motion is the refined one.
+    let ep = eight_point(x0, x1, &s.inliers).ok_or(NoMeasurement::Degenerate("8-point failed"))?;
+    let (r_lin, t_lin, _) = best_factorization(&ep.essential(), x0, x1, &s.inliers);
     let sigma = sampson_sigma(&r, &t, x0, x1, &s.inliers).max(sigma_floor);
     let cov_h = covariance_h(&ep, x0, x1, &s.inliers, sigma);
     let cov = propagate_to_motion(&ep.h(), &cov_h, &r_lin, &t_lin);
@@ -394,4 +412,116 @@ fn essential_solve(
         quality: quality(s.inliers.len(), x0.len()),
         solver: EgomotionSolver::Essential,
     })
+}
+
+/// Refines each of the successive RANSAC bests (`s.cands`) and keeps the one that explains the
+/// tracks best; leaves its inliers in `s.inliers`.
+///
+/// Each candidate: the 8-point on its inliers (eqs. 13–17), the factorization with most points
+/// in front (18–20), then a robust (Cauchy) Sampson refinement and the inliers of the refined
+/// motion, until that set settles. Why several: under forward motion with mostly far features
+/// the rotation and the focus of expansion trade off, and a few consistent but wrong tracks
+/// (aliased on lane dashes or rail sleepers, near features that changed scale) make a bent
+/// motion a local optimum that a refinement started inside it does not leave; which optimum
+/// the search ends in then depends on the RANSAC draws. The candidates are compared by the
+/// MSAC cost truncated at 3σ̂ (σ̂: the smallest robust residual scale among them, between the
+/// noise floor and the inlier threshold): the loose inlier threshold cannot tell a model that
+/// fits the good tracks at ≈ 0.1 px from one that fits a few more at ≈ 0.5 px.
+/// A refined candidate: `R`, `t̂` and its robust residual scale (normalized units).
+type Fit = (Matrix3<f64>, Vector3<f64>, f64);
+
+fn refine_candidates(
+    x0: &[Vector3<f64>],
+    x1: &[Vector3<f64>],
+    p: &SolveParams,
+    thr2: f64,
+    sigma_floor: f64,
+    s: &mut SolveScratch,
+) -> Result<(Matrix3<f64>, Vector3<f64>), NoMeasurement> {
+    let n = x0.len();
+    // (R, t, robust residual scale) per usable candidate
+    let mut fits: [Option<Fit>; HISTORY] = [None; HISTORY];
+    let mut cheirality_failed = false;
+    for (slot, k) in (0..s.cands.len()).rev().enumerate() {
+        let e = s.cands[k];
+        s.tmp.clear();
+        s.tmp
+            .extend((0..n).filter(|&i| sampson_sq(&e, &x0[i], &x1[i]) < thr2));
+        if s.tmp.len() < p.min_inliers.max(8) {
+            continue;
+        }
+        let Some(ep) = eight_point(x0, x1, &s.tmp) else {
+            continue;
+        };
+        let (mut r, mut t, votes) = best_factorization(&ep.essential(), x0, x1, &s.tmp);
+        if votes * 2 < s.tmp.len() {
+            cheirality_failed = true;
+            continue;
+        }
+        for round in 0..3 {
+            (r, t) = refine_sampson_robust(
+                &r,
+                &t,
+                x0,
+                x1,
+                &s.tmp,
+                p.refine_iterations,
+                sigma_floor,
+                &mut s.errs,
+            );
+            let e = skew(&t) * r;
+            s.inliers.clear();
+            s.inliers
+                .extend((0..n).filter(|&i| sampson_sq(&e, &x0[i], &x1[i]) < thr2));
+            if s.inliers == s.tmp || s.inliers.len() < p.min_inliers || round == 2 {
+                break;
+            }
+            std::mem::swap(&mut s.tmp, &mut s.inliers);
+        }
+        let e = skew(&t) * r;
+        s.errs.clear();
+        s.errs
+            .extend(s.tmp.iter().map(|&i| sampson_sq(&e, &x0[i], &x1[i]).sqrt()));
+        let mid = s.errs.len() / 2;
+        let med = *s.errs.select_nth_unstable_by(mid, f64::total_cmp).1;
+        fits[slot] = Some((r, t, 1.4826 * med));
+    }
+    let sigma = fits
+        .iter()
+        .flatten()
+        .map(|f| f.2)
+        .fold(f64::INFINITY, f64::min);
+    if !sigma.is_finite() {
+        return Err(if cheirality_failed {
+            NoMeasurement::Degenerate("cheirality: no factorization has most points in front")
+        } else {
+            NoMeasurement::TooFewInliers {
+                inliers: s.inliers.len() as u32,
+            }
+        });
+    }
+    let tau2 = (3.0 * sigma.max(sigma_floor)).powi(2).min(thr2);
+    let mut best: Option<(Matrix3<f64>, Vector3<f64>, f64)> = None;
+    for (r, t, _) in fits.iter().flatten() {
+        let e = skew(t) * r;
+        let cost: f64 = (0..n)
+            .map(|i| sampson_sq(&e, &x0[i], &x1[i]).min(tau2))
+            .sum();
+        if best.as_ref().is_none_or(|b| cost < b.2) {
+            best = Some((*r, *t, cost));
+        }
+    }
+    let Some((r, t, _)) = best else {
+        return Err(NoMeasurement::Degenerate("essential matrix: no consensus"));
+    };
+    let e = skew(&t) * r;
+    s.inliers.clear();
+    s.inliers
+        .extend((0..n).filter(|&i| sampson_sq(&e, &x0[i], &x1[i]) < thr2));
+    if s.inliers.len() < p.min_inliers.max(8) {
+        return Err(NoMeasurement::TooFewInliers {
+            inliers: s.inliers.len() as u32,
+        });
+    }
+    Ok((r, t))
 }
