@@ -175,6 +175,23 @@ pub fn ransac_essential(
     };
     // the HISTORY lowest-cost distinct models seen (after LO), ascending cost
     let mut top: Vec<(Matrix3<f64>, f64, usize)> = Vec::with_capacity(HISTORY + 1);
+    // inserts a model unless the same consensus is already there; whether it is the new best
+    let insert = |top: &mut Vec<(Matrix3<f64>, f64, usize)>, m: (Matrix3<f64>, f64, usize)| {
+        if top.len() == HISTORY && top.last().is_some_and(|w| m.1 >= w.1) {
+            return false;
+        }
+        // the same consensus reached again (LO converges to the same set) adds nothing
+        if top
+            .iter()
+            .any(|o| (o.1 - m.1).abs() <= 1e-9 * m.1.max(1e-300))
+        {
+            return false;
+        }
+        let pos = top.partition_point(|o| o.1 <= m.1);
+        top.insert(pos, m);
+        top.truncate(HISTORY);
+        pos == 0
+    };
     let consider = |e: Matrix3<f64>,
                     top: &mut Vec<(Matrix3<f64>, f64, usize)>,
                     scratch: &mut Vec<usize>|
@@ -183,7 +200,7 @@ pub fn ransac_essential(
         if top.len() == HISTORY && top.last().is_some_and(|w| cost >= w.1) {
             return false;
         }
-        // LO: 8-point on the inliers of the hypothesis
+        // LO: 8-point on the inliers of the hypothesis; the better of the two is kept
         let mut cand = (e, cost, c);
         collect_inliers(n, p.threshold, scratch, |i| sampson_sq(&e, &x0[i], &x1[i]));
         if let Some(ep) = eight_point(x0, x1, scratch) {
@@ -193,17 +210,7 @@ pub fn ransac_essential(
                 cand = (e2, cost2, c2);
             }
         }
-        // the same consensus reached again (LO converges to the same set) adds nothing
-        if top
-            .iter()
-            .any(|m| (m.1 - cand.1).abs() <= 1e-9 * cand.1.max(1e-300))
-        {
-            return false;
-        }
-        let pos = top.partition_point(|m| m.1 <= cand.1);
-        top.insert(pos, cand);
-        top.truncate(HISTORY);
-        pos == 0
+        insert(top, cand)
     };
     let mut pair = [0usize; 2];
     if let Some(r) = prior {

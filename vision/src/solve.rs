@@ -414,7 +414,10 @@ fn essential_solve(
     })
 }
 
-/// Refines each of the successive RANSAC bests (`s.cands`) and keeps the one that explains the
+/// A refined candidate: `R`, `t̂` and its robust residual scale (normalized units).
+type Fit = (Matrix3<f64>, Vector3<f64>, f64);
+
+/// Refines each of the few lowest-cost RANSAC models (`s.cands`) and keeps the one that explains the
 /// tracks best; leaves its inliers in `s.inliers`.
 ///
 /// Each candidate: the 8-point on its inliers (eqs. 13–17), the factorization with most points
@@ -427,9 +430,6 @@ fn essential_solve(
 /// MSAC cost truncated at 3σ̂ (σ̂: the smallest robust residual scale among them, between the
 /// noise floor and the inlier threshold): the loose inlier threshold cannot tell a model that
 /// fits the good tracks at ≈ 0.1 px from one that fits a few more at ≈ 0.5 px.
-/// A refined candidate: `R`, `t̂` and its robust residual scale (normalized units).
-type Fit = (Matrix3<f64>, Vector3<f64>, f64);
-
 fn refine_candidates(
     x0: &[Vector3<f64>],
     x1: &[Vector3<f64>],
@@ -450,10 +450,7 @@ fn refine_candidates(
         if s.tmp.len() < p.min_inliers.max(8) {
             continue;
         }
-        let Some(ep) = eight_point(x0, x1, &s.tmp) else {
-            continue;
-        };
-        let (mut r, mut t, votes) = best_factorization(&ep.essential(), x0, x1, &s.tmp);
+        let (mut r, mut t, votes) = best_factorization(&e, x0, x1, &s.tmp);
         if votes * 2 < s.tmp.len() {
             cheirality_failed = true;
             continue;

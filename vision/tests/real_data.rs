@@ -85,7 +85,10 @@ fn kitti_frames_0_to_5() {
         .iter()
         .map(|v| oxts_pose(v, scale) * cam_from_imu.inverse())
         .collect();
-    // OXTS stops at frame 4: extrapolate frame 5 with the 3→4 motion (straight, ~constant speed)
+    // OXTS stops at frame 4: extrapolate frame 5 with the 3→4 motion (straight, ~constant
+    // speed; the camera gaps 3→4 and 4→5 are 103.1 and 103.0 ms). The alternatives agree with it
+    // to ≤ 0.06° over 0→5: the 3→4 step scaled by the camera or OXTS time gaps, the OXTS body
+    // rates of frame 4 (wx, wy, wz) over the camera gap, or those rates extrapolated linearly.
     let step = world_from_cam[3].inverse() * world_from_cam[4];
     world_from_cam.push(world_from_cam[4] * step);
     let frame = |k: usize| std::fs::read(seq.join(format!("image_00/data/{k:010}.png"))).unwrap();
@@ -121,55 +124,74 @@ fn kitti_frames_0_to_5() {
         assert!(rot_deg < 0.2, "{}→{k}: rotation err {rot_deg}°", k - 1);
         assert!(dir_deg < 3.0, "{}→{k}: direction err {dir_deg}°", k - 1);
     }
-    // the direct 0→5 pair (6.7 m of forward motion: strong scale change near the edges)
-    let params = VisionParams {
+    // The direct pairs 0→4 (OXTS at both ends) and 0→5 (5.4 and 6.7 m of forward motion).
+    // Near features change scale by 25–50 % and are lost; the survivors are mostly far, where
+    // yaw and roll trade off against the focus of expansion, and a few consistent but wrong
+    // tracks remain (aliased on the dashed lane marking, the rail sleepers, a pole's shadow:
+    // they pass the forward–backward check). The far tracks fit the OXTS motion to ≈ 0.1 px; a
+    // least-squares fit on the 1 px inliers of the best-counted RANSAC model bent towards the
+    // wrong tracks instead and missed by 0.3° (over 40 RANSAC seeds 0→5: 0.34° median, 0.52° p90;
+    // 0→4 alike, 0.32° median): the estimate, not the extrapolated reference, was off. The
+    // essential solver now ranks models by MSAC cost and refines the best few robustly (see
+    // `solve::refine_candidates`). Asserted over ten RANSAC seeds, not one.
+    let params = |seed: u64| VisionParams {
         pyramid_levels: 4,
         max_features: 400,
+        seed,
         ..VisionParams::default()
     };
-    let mut fe = FrontEnd::new(&camera, Isometry3::identity(), params);
-    let _ = fe.process(0, ImageFormat::Png, &frame(0), &MotionPrior::default());
-    let res = fe.process(
-        5 * 103_000_000,
-        ImageFormat::Png,
-        &frame(5),
-        &MotionPrior::default(),
-    );
-    let ego = res
-        .outcome
-        .as_ref()
-        .unwrap_or_else(|e| panic!("0→5: no measurement: {e}"));
-    let tr = truth(0, 5);
-    let err = pair_error(ego, &tr.rotation, &tr.translation.vector);
-    let (rot_deg, dir_deg) = (
-        err.rot_err_rad.to_degrees(),
-        err.t_dir_err_rad.unwrap_or(f64::NAN).to_degrees(),
-    );
+    let direct = |a: usize, b: usize, seed: u64| {
+        let mut fe = FrontEnd::new(&camera, Isometry3::identity(), params(seed));
+        let _ = fe.process(0, ImageFormat::Png, &frame(a), &MotionPrior::default());
+        let res = fe.process(
+            (b - a) as i64 * 103_000_000,
+            ImageFormat::Png,
+            &frame(b),
+            &MotionPrior::default(),
+        );
+        let ego = res
+            .outcome
+            .unwrap_or_else(|e| panic!("{a}→{b}: no measurement: {e}"));
+        let tr = truth(a, b);
+        let err = pair_error(&ego, &tr.rotation, &tr.translation.vector);
+        (
+            ego,
+            err.rot_err_rad.to_degrees(),
+            err.t_dir_err_rad.unwrap_or(f64::NAN).to_degrees(),
+        )
+    };
+    let default_seed = VisionParams::default().seed;
+    for b in [4usize, 5] {
+        let (ego, rot_deg, dir_deg) = direct(0, b, default_seed);
+        let tr = truth(0, b);
+        eprintln!(
+            "KITTI 0→{b} direct: {:?}, tracked {}, inliers {}, rotation err {rot_deg:.4}° (est {:?}° true {:?}°), direction err {dir_deg:.3}°",
+            ego.solver,
+            ego.tracked,
+            ego.inliers,
+            ego.cam1_from_cam0
+                .scaled_axis()
+                .map(f64::to_degrees)
+                .as_slice(),
+            tr.rotation.scaled_axis().map(f64::to_degrees).as_slice(),
+        );
+        assert!(rot_deg < 0.2, "0→{b}: rotation err {rot_deg}°");
+        assert!(dir_deg < 3.0, "0→{b}: direction err {dir_deg}°");
+    }
+    let (mut rots, mut dirs): (Vec<f64>, Vec<f64>) = (0..10u64)
+        .map(|k| {
+            let (_, r, d) = direct(0, 5, default_seed + 7919 * k);
+            (r, d)
+        })
+        .unzip();
+    rots.sort_by(f64::total_cmp);
+    dirs.sort_by(f64::total_cmp);
     eprintln!(
-        "KITTI 0→5 direct: {:?}, tracked {}, inliers {}, rotation err {rot_deg:.4}° (est {:?}° true {:?}°), t {:?} true {:?}, direction err {dir_deg:.3}°",
-        ego.solver,
-        ego.tracked,
-        ego.inliers,
-        ego.cam1_from_cam0
-            .scaled_axis()
-            .map(f64::to_degrees)
-            .as_slice(),
-        tr.rotation.scaled_axis().map(f64::to_degrees).as_slice(),
-        ego.t_dir_cam1
-            .map(|u| u.into_inner())
-            .unwrap_or_default()
-            .as_slice(),
-        tr.translation.vector.as_slice(),
+        "KITTI 0→5 over 10 RANSAC seeds: rotation err median {:.3}° max {:.3}°, direction err median {:.3}° max {:.3}°",
+        rots[5], rots[9], dirs[5], dirs[9]
     );
-    // Hardest case: over 6.7 m the near features change scale by 25–50 % and are lost by the
-    // translation-only window; the survivors are mostly far (yaw and the focus of expansion
-    // are then weakly separated). The reference itself is soft here: OXTS ends at frame 4 and
-    // frame 5 is extrapolated, and the direct estimate agrees with the chain of the consecutive
-    // estimates above (both ~0.19° less yaw than the reference). Over 40 RANSAC seeds the error
-    // is 0.32° median, 0.55° p90 with the scalar KLT this suite was first tuned on, and 0.34°,
-    // 0.52° with the vectorized one: the earlier 0.2° bound held only for some seeds.
-    assert!(rot_deg < 0.5, "0→5: rotation err {rot_deg}°");
-    assert!(dir_deg < 3.0, "0→5: direction err {dir_deg}°");
+    assert!(rots[9] < 0.2, "0→5: rotation errors over seeds {rots:?}");
+    assert!(dirs[9] < 3.0, "0→5: direction errors over seeds {dirs:?}");
 }
 
 fn euroc_camera() -> CameraModel {
