@@ -412,3 +412,24 @@ fn normalized_diff(a: &uavnav_estimator::state::Cov, b: &uavnav_estimator::state
     }
     m
 }
+
+#[test]
+fn paper_lever_arm_jacobian_matches_finite_differences() {
+    // `∂(C(φ,θ,ψ) u)/∂(φ,θ,ψ)` of the paper profile's eqs. (32)–(33) linearization.
+    use nalgebra::Rotation3;
+    use uavnav_estimator::paper::attitude::lever_jacobian;
+    let e = Vector3::new(0.4, -0.3, 2.5);
+    let u = Vector3::new(10.0, -7.0, 3.0);
+    let c_u = |e: &Vector3<f64>| Rotation3::from_euler_angles(e.x, e.y, e.z) * u;
+    let h = lever_jacobian(&e, &u);
+    let d = 1e-6;
+    for k in 0..3 {
+        let mut ep = e;
+        let mut em = e;
+        ep[k] += d;
+        em[k] -= d;
+        let num = (c_u(&ep) - c_u(&em)) / (2.0 * d);
+        let err = (num - h.column(k)).norm();
+        assert!(err < 1e-6, "column {k}: {num:?} vs {:?}", h.column(k));
+    }
+}

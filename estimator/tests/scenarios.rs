@@ -74,29 +74,60 @@ fn eskf_meets_targets_big_lever() {
     eskf_targets("paper-big-lever");
 }
 
+/// Paper profile with the gyro-bias allowance of the simulated IMU (10 °/h turn-on bias over the
+/// 250 s flight: (5e-5 rad/s)² × 250 s ≈ 6e-7 (rad/s)²/Hz), and an oracle whose rotation noise is
+/// that of the vision front end on these flights (40–90 µrad per axis; the default oracle's 175 µrad
+/// accumulates in the eq. (34) pseudo-attitude to more than the gyro drift).
+fn paper_cfg(video: bool) -> RunCfg {
+    let oracle = Oracle {
+        rot_sigma_rad: 70e-6,
+        ..Oracle::default()
+    };
+    let mut cfg = RunCfg::new(FilterProfile::Paper, true, video.then_some(oracle));
+    cfg.params.paper_gyro_instability_psd = 6e-7;
+    cfg
+}
+
 #[test]
 fn paper_profile_reproduces_the_qualitative_results() {
-    let name = "paper-small-lever";
-    let video = report(
-        name,
-        &RunCfg::new(FilterProfile::Paper, true, Some(Oracle::default())),
-    );
-    let gnss = report(name, &RunCfg::new(FilterProfile::Paper, true, None));
-    // Figs. 4–5: with video (VIDEO-IMU(2)) the outage is bridged far better than by coasting.
+    // Section VI, on both lever-arm configurations (RMSE after 30 s, including the outage).
+    let small_v = report("paper-small-lever", &paper_cfg(true));
+    let small_g = report("paper-small-lever", &paper_cfg(false));
+    let big_v = report("paper-big-lever", &paper_cfg(true));
+    let big_g = report("paper-big-lever", &paper_cfg(false));
+    let att = |r: &AccuracyReport| r.att_rmse_deg.unwrap();
+    // (a) Figs. 2–3: video-aided attitude beats GNSS-aided in roll and pitch in both
+    // configurations, and in yaw with the small lever arm. (With the big lever arm the GNSS yaw,
+    // observable through `C (ω × r)` in the turns, is as good as the video's: NOT asserted.)
+    for (name, v, g) in [("small", &small_v, &small_g), ("big", &big_v, &big_g)] {
+        let (av, ag) = (att(v), att(g));
+        assert!(
+            av.x < 0.7 * ag.x && av.y < 0.7 * ag.y,
+            "{name} lever: video {av:?} vs GNSS-only {ag:?}"
+        );
+    }
+    assert!(att(&small_v).z < 0.7 * att(&small_g).z);
+    // (b) Fig. 3: without video the small lever arm leaves yaw much worse (the GNSS reaches the
+    // attitude only through the lever arm); with video both configurations are alike.
+    let (sg, bg) = (att(&small_g), att(&big_g));
     assert!(
-        video.outages[0].percent < 0.5 * gnss.outages[0].percent,
-        "{:?} vs {:?}",
-        video.outages,
-        gnss.outages
+        sg.z > 2.0 * bg.z,
+        "GNSS-only yaw small {sg:?} vs big {bg:?}"
     );
-    // Figs. 2–3: video improves roll and pitch. (Yaw is NOT reproduced: the eq. (34) pseudo-attitude
-    // keeps the heading error of its starting value, while the GNSS-only baseline's course-based
-    // heading is very good in the wind-free simulator. Reported, not asserted.)
-    let (v, g) = (video.att_rmse_deg.unwrap(), gnss.att_rmse_deg.unwrap());
+    let (sv, bv) = (att(&small_v), att(&big_v));
     assert!(
-        v.x < g.x && v.y < g.y,
-        "paper attitude with video {v:?} vs GNSS-only {g:?}"
+        sv.max() < 1.5 * bv.max() && bv.max() < 1.5 * sv.max(),
+        "video {sv:?} vs {bv:?}"
     );
+    // (c) Figs. 4–5: with video (VIDEO-IMU(2)) the outage is bridged far better than by coasting.
+    for (v, g) in [(&small_v, &small_g), (&big_v, &big_g)] {
+        assert!(
+            v.outages[0].percent < 0.5 * g.outages[0].percent,
+            "{:?} vs {:?}",
+            v.outages,
+            g.outages
+        );
+    }
 }
 
 #[test]

@@ -13,7 +13,8 @@
 //! covariance per eigen-direction, their biases and time correlation, the estimator's vision NIS,
 //! attitude errors by segment and a yaw / gyro-bias / velocity-error series (`YAW_STEP_S`, 10 s).
 //! Experiment switches: `--pixel-sigma PX`, `--metric-scale-sigma REL`, `--normal-sigma-deg D`
-//! (vision solver), `--vision-cov-scale K`, `--joint` / `--separate` (estimator).
+//! (vision solver), `--vision-cov-scale K`, `--joint` / `--separate` (estimator),
+//! `--gyro-instability-psd Q` (paper profile: `EstimatorParams::paper_gyro_instability_psd`).
 //!
 //! `--frame-cache DIR` keeps the rendered JPEGs (`DIR/<t_ns>.jpg`) so that later runs skip the
 //! renderer; without vision no frame is rendered (the runner gets empty frames and ignores them).
@@ -50,6 +51,7 @@ struct Args {
     metric_scale_sigma: Option<f64>,
     joint: Option<bool>,
     normal_sigma_deg: Option<f64>,
+    gyro_instability_psd: Option<f64>,
 }
 
 fn parse_args() -> Args {
@@ -65,6 +67,7 @@ fn parse_args() -> Args {
         metric_scale_sigma: None,
         joint: None,
         normal_sigma_deg: None,
+        gyro_instability_psd: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -88,6 +91,9 @@ fn parse_args() -> Args {
             "--joint" => a.joint = Some(true),
             "--normal-sigma-deg" => a.normal_sigma_deg = it.next().and_then(|s| s.parse().ok()),
             "--separate" => a.joint = Some(false),
+            "--gyro-instability-psd" => {
+                a.gyro_instability_psd = it.next().and_then(|s| s.parse().ok());
+            }
             path => a.scenario = path.to_string(),
         }
     }
@@ -352,6 +358,9 @@ fn main() {
     }
     if let Some(s) = args.vision_cov_scale {
         params.estimator.vision_cov_scale = s;
+    }
+    if let Some(q) = args.gyro_instability_psd {
+        params.estimator.paper_gyro_instability_psd = q;
     }
     if let Some(s) = args.metric_scale_sigma {
         params.vision.solve.metric_scale_sigma = s;

@@ -7,12 +7,19 @@
 //! | [`attitude`] | VIDEO-IMU(1): Euler angles from gyro rates (eq. 31) + video pseudo-attitude (eq. 34) |
 //! | [`posvel`] | GPS-IMU (eqs. 29, 30, 32, 33) and VIDEO-IMU(2) (eq. 35): position/velocity EKFs |
 //!
-//! The paper's "IMU+GPS estimation" must get attitude from somewhere: the VIDEO-IMU(1) filter
-//! fuses a GNSS-derived attitude at every fix — roll/pitch from the accelerometers compensated by
-//! the GNSS acceleration, yaw from the GNSS course (assumes no sideslip/crab) — with σ of a few
-//! degrees. This is our reading, not the paper's text. With video, the pseudo-attitude of eq. (34)
-//! starts from the filter's attitude once it has converged (its "initial known value") and is
-//! fused in addition. The un-modelled gyro bias is covered by extra process noise.
+//! Where the attitude comes from (our reading of sections V–VI):
+//! - Alignment (the "initial known value" of eq. 34): from the first fix, roll/pitch from the
+//!   accelerometers compensated by the GNSS acceleration and yaw from the GNSS course (no
+//!   sideslip), fused at every fix with σ of a few degrees until every attitude σ is below
+//!   `paper_video_start_sigma_rad` (a few seconds), then never again.
+//! - After that, GNSS reaches the attitude only through the lever arm of eqs. (32)–(33): the
+//!   GNSS update is linearized in the Euler angles too (`posvel::PosVelEkf::update_gnss`), so with a
+//!   big lever arm the attitude stays observable and with a small one it is nearly gyro
+//!   integration, as in section VI.
+//! - With video, the eq. (34) pseudo-attitude starts from the aligned attitude and is fused with
+//!   its accumulated error as a state (see [`attitude`]).
+//!
+//! The un-modelled gyro bias is covered by extra process noise.
 
 pub mod attitude;
 pub mod posvel;
@@ -32,9 +39,11 @@ use crate::prediction::{GravityCache, earth_rate_ned};
 use attitude::AttitudeEkf;
 use posvel::PosVelEkf;
 
+/// Window of the mean body rate used in the lever-arm velocity of eq. (33), ns.
+const GYRO_MEAN_NS: i64 = 100_000_000;
 /// No GNSS for this long activates VIDEO-IMU(2), ns.
 const OUTAGE_AFTER_NS: i64 = 1_000_000_000;
-/// σ of the GNSS-derived tilt and course pseudo-measurements, rad.
+/// σ of the GNSS-derived tilt and course pseudo-measurements of the alignment, rad.
 const GNSS_TILT_SIGMA_RAD: f64 = 0.035;
 const GNSS_COURSE_SIGMA_RAD: f64 = 0.05;
 /// σ of the held speed of eq. (35) at the start of an outage, m/s, and its growth, m/s per s.
@@ -62,8 +71,10 @@ pub struct PaperFilter {
     f_sum: (Vector3<f64>, u32),
     init_f: VecDeque<Vector3<f64>>,
     health: Health,
-    /// Diagnostics of the GNSS-derived attitude aiding (no-video case).
+    /// Diagnostics of the GNSS-derived attitude aiding of the alignment.
     gnss_att_diag: crate::aid_sources::InnovDiag,
+    /// The alignment is over (every attitude σ fell below `paper_video_start_sigma_rad`).
+    aligned: bool,
 }
 
 impl PaperFilter {
@@ -92,6 +103,7 @@ impl PaperFilter {
             init_f: VecDeque::new(),
             health: Health::default(),
             gnss_att_diag: crate::aid_sources::InnovDiag::new(),
+            aligned: false,
         };
         if let Some(o) = origin {
             s.set_frame(o);
@@ -119,6 +131,7 @@ impl PaperFilter {
         fresh.f_sum = (Vector3::zeros(), 0);
         fresh.init_f.clear();
         fresh.health = Health::default();
+        fresh.aligned = false;
         *self = fresh;
         if let Some(o) = cfg_frame {
             self.set_frame(o);
@@ -161,7 +174,7 @@ impl PaperFilter {
             s.t_ns,
         );
         let c = att.rotation();
-        let att_var = att.p.trace() / 3.0;
+        let att_var = att.p_euler().trace() / 3.0;
         let g = self
             .gravity
             .get_or_insert_with(|| GravityCache::new(&frame, &gi.x))
@@ -202,11 +215,20 @@ impl PaperFilter {
             Vector3::zeros()
         };
         self.f_sum = (Vector3::zeros(), 0);
-        let gyro = self
+        // Body rate for the lever-arm velocity of eq. (33): the mean over the last 0.1 s (one raw
+        // sample's noise times a 10 m lever arm is a third of the GNSS velocity σ).
+        let recent: Vec<_> = self
             .imu
-            .back()
+            .iter()
+            .rev()
+            .take_while(|s| fix.t_ns - s.t_ns < GYRO_MEAN_NS)
             .map(|s| s.gyro_radps)
-            .unwrap_or_else(Vector3::zeros);
+            .collect();
+        let gyro = match (recent.len(), self.imu.back()) {
+            (0, Some(s)) => s.gyro_radps,
+            (0, None) => Vector3::zeros(),
+            (n, _) => recent.iter().sum::<Vector3<f64>>() / n as f64,
+        };
         let a_n = match self.last_fix {
             Some((p, _)) if meas.t_ns > p.t_ns && meas.t_ns - p.t_ns < 2_000_000_000 => {
                 (meas.vel_ned_mps - p.vel_ned_mps) / ((meas.t_ns - p.t_ns) as f64 * 1e-9)
@@ -219,10 +241,13 @@ impl PaperFilter {
             self.try_init(&meas, &g, &a_n, &gyro);
             return;
         }
+        let start_var = self.params.paper_video_start_sigma_rad.powi(2);
         if let Some(att) = self.att.as_mut()
-            && f_mean.norm() > 1.0
+            && !self.aligned
         {
-            {
+            if att.p_euler().diagonal().max() <= start_var {
+                self.aligned = true;
+            } else if f_mean.norm() > 1.0 {
                 gnss_attitude_aiding(
                     att,
                     &f_mean,
@@ -234,15 +259,14 @@ impl PaperFilter {
                 );
             }
         }
-        let (Some(att), Some(gi)) = (self.att.as_ref(), self.gps_imu.as_mut()) else {
+        let (Some(att), Some(gi)) = (self.att.as_mut(), self.gps_imu.as_mut()) else {
             return;
         };
-        let c = att.rotation();
-        let w_nb = gyro - c.transpose() * self.w_ie;
+        let w_nb = gyro - att.rotation().transpose() * self.w_ie;
         let gate = self.params.gate_sigma;
         gi.update_gnss(
             &meas,
-            &c,
+            att,
             &self.lever_b,
             &w_nb,
             gate,
@@ -303,11 +327,18 @@ impl PaperFilter {
             return;
         };
         let gate = self.params.gate_sigma;
+        // A chain starts only once aligned; a restart later is allowed whatever σ has grown to
+        // (the chain's error state starts from the filter's covariance, so it stays honest).
+        let start_sigma = if self.aligned {
+            f64::INFINITY
+        } else {
+            self.params.paper_video_start_sigma_rad
+        };
         att.video_update(
             m,
             &bfc,
             gate,
-            self.params.paper_video_start_sigma_rad,
+            start_sigma,
             self.params.vision_cov_scale,
             &mut self.health.vision_rot,
         );
@@ -423,7 +454,7 @@ impl PaperFilter {
             euler_rad: att.euler,
             sigma_pos_ned_m: sd(&pv.p.fixed_view::<3, 3>(0, 0).into_owned()),
             sigma_vel_mps: sd(&pv.p.fixed_view::<3, 3>(3, 3).into_owned()),
-            sigma_att_rad: sd(&att.p),
+            sigma_att_rad: sd(&att.p_euler()),
             gyro_bias_radps: Vector3::zeros(),
             accel_bias_mps2: Vector3::zeros(),
             health: h,

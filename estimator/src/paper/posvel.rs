@@ -1,11 +1,15 @@
 //! The paper's position/velocity EKFs. GPS-IMU: `r̈ = C f + g` (eq. 29, plus the Earth-rate
 //! Coriolis term of our rotating frame), `ṙ = v` (eq. 30), with GNSS position and velocity through
-//! the lever arm (eqs. 32–33; the attitude comes from VIDEO-IMU(1) and is not a state here).
-//! VIDEO-IMU(2) is the same filter started from GPS-IMU at an outage and corrected by the video
-//! velocity of eq. (35).
+//! the lever arm (eqs. 32–33). The attitude is not a state here but VIDEO-IMU(1)'s: the lever-arm
+//! terms `C r` and `C (ω × r)` depend on it, so a GNSS update is one EKF update of both filters'
+//! states (`H = [I | ∂(C u)/∂e]`) with the cross-covariance between them not kept. This is where
+//! the GNSS makes the attitude observable, through the lever arm only (section VI: "observability
+//! is guaranteed by the lever arm"). VIDEO-IMU(2) is the same filter started from GPS-IMU at an
+//! outage and corrected by the video velocity of eq. (35).
 
 use nalgebra::{Matrix3, SMatrix, Vector3};
 
+use super::attitude::{AttitudeEkf, lever_jacobian};
 use crate::aid_sources::gnss_pos::GnssMeas;
 use crate::aid_sources::{InnovDiag, chi2_gate};
 
@@ -54,25 +58,23 @@ impl PosVelEkf {
         }
     }
 
-    /// Gated 3-D update of the block at `off` (0 = position, 3 = velocity) with measurement `z`
-    /// of that block and noise `r`. Returns whether it was fused.
+    /// Gated 3-D update of the block at `off` (0 = position, 3 = velocity) with innovation `y`
+    /// and noise `r` (measurement noise plus any other filter's uncertainty seen through the
+    /// measurement). Returns `S⁻¹` when fused.
     #[allow(clippy::too_many_arguments)]
     fn update_block(
         &mut self,
         off: usize,
-        z: &Vector3<f64>,
+        y: &Vector3<f64>,
         r: &Matrix3<f64>,
         gate: f64,
         t_ns: i64,
         force: bool,
         diag: &mut InnovDiag,
-    ) -> bool {
-        let pred = if off == 0 { self.x } else { self.v };
-        let y = z - pred;
+    ) -> Option<Matrix3<f64>> {
+        let y = *y;
         let s = self.p.fixed_view::<3, 3>(off, off).into_owned() + r;
-        let Some(s_inv) = s.try_inverse() else {
-            return false;
-        };
+        let s_inv = s.try_inverse()?;
         let nis = (y.transpose() * s_inv * y)[(0, 0)];
         diag.innov = [y.x, y.y, y.z];
         diag.innov_var = [s[(0, 0)], s[(1, 1)], s[(2, 2)]];
@@ -83,7 +85,7 @@ impl PosVelEkf {
             }
             diag.rejected += 1;
             diag.consecutive_rejects += 1;
-            return false;
+            return None;
         }
         let pht: SMatrix<f64, 6, 3> = self.p.fixed_columns::<3>(off).into_owned();
         let k = pht * s_inv;
@@ -95,15 +97,16 @@ impl PosVelEkf {
         diag.fused += 1;
         diag.consecutive_rejects = 0;
         diag.last_fused_t_ns = t_ns;
-        true
+        Some(s_inv)
     }
 
-    /// GNSS position (eq. 32) and velocity (eq. 33) through the lever arm with the given attitude.
+    /// GNSS position (eq. 32) and velocity (eq. 33) through the lever arm: updates this filter
+    /// and the attitude of `att` (see the module doc). `w_nb` is the body rate.
     #[allow(clippy::too_many_arguments)]
     pub fn update_gnss(
         &mut self,
         m: &GnssMeas,
-        c: &Matrix3<f64>,
+        att: &mut AttitudeEkf,
         lever_b: &Vector3<f64>,
         w_nb: &Vector3<f64>,
         gate: f64,
@@ -111,32 +114,44 @@ impl PosVelEkf {
         diag_pos: &mut InnovDiag,
         diag_vel: &mut InnovDiag,
     ) {
+        // Eq. (32): p_GPS = p_cg + C r. Its attitude part ∂(C r)/∂e is NOT fused: the GNSS position
+        // error is time-correlated (Gauss–Markov, metres over minutes) while this filter takes it
+        // as white, so the residuals follow that slow error, and read through a lever arm of
+        // metres they become attitude errors of tenths of a degree (measured: roll/pitch/yaw RMSE
+        // 2–3× worse with a 10 m lever arm). The position is corrected with the current `C r`.
         let rp = Matrix3::from_diagonal(&Vector3::new(
             m.sigma_h_m.powi(2),
             m.sigma_h_m.powi(2),
             m.sigma_v_m.powi(2),
         ));
-        let z = m.pos_ned_m - c * lever_b;
+        let y = m.pos_ned_m - (self.x + att.rotation() * lever_b);
         let stuck = diag_pos.consecutive_rejects > 0
             && m.t_ns - diag_pos.first_reject_t_ns >= reset_timeout_ns;
         if stuck {
-            let y = z - self.x;
             for k in 0..3 {
                 self.p[(k, k)] += y[k] * y[k];
             }
         }
-        self.update_block(0, &z, &rp, gate, m.t_ns, stuck, diag_pos);
-        let zv = m.vel_ned_mps - c * w_nb.cross(lever_b);
+        self.update_block(0, &y, &rp, gate, m.t_ns, stuck, diag_pos);
+        // Eq. (33): v_GPS = v_cg + C (ω × r), fused into both filters. The GNSS velocity error is
+        // white, and in turns `ω × r` is metres per second for a 10 m lever arm (a tenth of that
+        // for 2 m), which is what makes the attitude observable (section VI).
+        let c = att.rotation();
+        let u = w_nb.cross(lever_b);
+        let h_e = lever_jacobian(&att.euler, &u);
+        let y = m.vel_ned_mps - (self.v + c * u);
         let rv = Matrix3::identity() * m.sigma_vel_mps.powi(2);
         let stuck = diag_vel.consecutive_rejects > 0
             && m.t_ns - diag_vel.first_reject_t_ns >= reset_timeout_ns;
         if stuck {
-            let y = zv - self.v;
             for k in 0..3 {
                 self.p[(3 + k, 3 + k)] += y[k] * y[k];
             }
         }
-        self.update_block(3, &zv, &rv, gate, m.t_ns, stuck, diag_vel);
+        let r = rv + h_e * att.p_euler() * h_e.transpose();
+        if let Some(s_inv) = self.update_block(3, &y, &r, gate, m.t_ns, stuck, diag_vel) {
+            att.apply_joint(&h_e, &s_inv, &y);
+        }
     }
 
     /// Eq. (35): a velocity measurement from the video direction times the last valid speed.
@@ -149,6 +164,7 @@ impl PosVelEkf {
         diag: &mut InnovDiag,
     ) {
         let r = Matrix3::identity() * sigma_mps.powi(2);
-        self.update_block(3, v_meas, &r, gate, t_ns, false, diag);
+        let y = v_meas - self.v;
+        self.update_block(3, &y, &r, gate, t_ns, false, diag);
     }
 }
