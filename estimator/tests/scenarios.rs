@@ -74,18 +74,17 @@ fn eskf_meets_targets_big_lever() {
     eskf_targets("paper-big-lever");
 }
 
-/// Paper profile with the gyro-bias allowance of the simulated IMU (10 °/h turn-on bias over the
-/// 250 s flight: (5e-5 rad/s)² × 250 s ≈ 6e-7 (rad/s)²/Hz), and an oracle whose rotation noise is
-/// that of the vision front end on these flights (40–90 µrad per axis; the default oracle's 175 µrad
-/// accumulates in the eq. (34) pseudo-attitude to more than the gyro drift).
+/// Paper profile with its default parameters (the gyro-bias allowance
+/// `EstimatorParams::paper_gyro_instability_psd` is derived from the simulated IMU), and an oracle
+/// whose rotation noise is that of the vision front end on these flights (40–90 µrad per axis; the
+/// default oracle's 175 µrad accumulates in the eq. (34) pseudo-attitude to more than the gyro
+/// drift).
 fn paper_cfg(video: bool) -> RunCfg {
     let oracle = Oracle {
         rot_sigma_rad: 70e-6,
         ..Oracle::default()
     };
-    let mut cfg = RunCfg::new(FilterProfile::Paper, true, video.then_some(oracle));
-    cfg.params.paper_gyro_instability_psd = 6e-7;
-    cfg
+    RunCfg::new(FilterProfile::Paper, true, video.then_some(oracle))
 }
 
 #[test]

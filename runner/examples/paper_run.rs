@@ -14,7 +14,8 @@
 //! attitude errors by segment and a yaw / gyro-bias / velocity-error series (`YAW_STEP_S`, 10 s).
 //! Experiment switches: `--pixel-sigma PX`, `--metric-scale-sigma REL`, `--normal-sigma-deg D`
 //! (vision solver), `--vision-cov-scale K`, `--joint` / `--separate` (estimator),
-//! `--gyro-instability-psd Q` (paper profile: `EstimatorParams::paper_gyro_instability_psd`).
+//! `--gyro-instability-psd Q` (paper profile: overrides `EstimatorParams::paper_gyro_instability_psd`,
+//! whose default is derived from the simulated IMU; the paper table uses the default).
 //!
 //! `--frame-cache DIR` keeps the rendered JPEGs (`DIR/<t_ns>.jpg`) so that later runs skip the
 //! renderer; without vision no frame is rendered (the runner gets empty frames and ignores them).
