@@ -215,19 +215,24 @@ impl PaperFilter {
             Vector3::zeros()
         };
         self.f_sum = (Vector3::zeros(), 0);
-        // Body rate for the lever-arm velocity of eq. (33): the mean over the last 0.1 s (one raw
-        // sample's noise times a 10 m lever arm is a third of the GNSS velocity σ).
+        // Body rate for the lever-arm velocity of eq. (33) AT the fix time: a straight line fitted
+        // to the last 0.1 s of gyro samples, evaluated at the fix (one raw sample's noise times a
+        // 10 m lever arm is a third of the GNSS velocity σ). The plain mean over that window
+        // refers to 50 ms before the fix: entering or leaving a banked turn (roll accelerations of
+        // ~0.2 rad/s²) that lag is ~0.01 rad/s, i.e. 0.1–0.2 m/s through a 17 m lever arm, 2–4× the
+        // velocity σ, and the filter reads it as attitude error.
         let recent: Vec<_> = self
             .imu
             .iter()
             .rev()
+            .filter(|s| s.t_ns <= fix.t_ns)
             .take_while(|s| fix.t_ns - s.t_ns < GYRO_MEAN_NS)
-            .map(|s| s.gyro_radps)
+            .map(|s| ((s.t_ns - fix.t_ns) as f64 * 1e-9, s.gyro_radps))
             .collect();
         let gyro = match (recent.len(), self.imu.back()) {
             (0, Some(s)) => s.gyro_radps,
             (0, None) => Vector3::zeros(),
-            (n, _) => recent.iter().sum::<Vector3<f64>>() / n as f64,
+            (n, _) => rate_at_zero(&recent, n),
         };
         let a_n = match self.last_fix {
             Some((p, _)) if meas.t_ns > p.t_ns && meas.t_ns - p.t_ns < 2_000_000_000 => {
@@ -517,4 +522,22 @@ pub fn heading_without_sideslip(roll: f64, pitch: f64, vel_n: &Vector3<f64>) -> 
         yaw -= f / df;
     }
     uavnav_core::rotation::wrap_pi(yaw)
+}
+
+/// Least-squares line through `(t, ω)` samples (t ≤ 0, s) evaluated at t = 0; the mean when the
+/// samples span no time.
+fn rate_at_zero(samples: &[(f64, Vector3<f64>)], n: usize) -> Vector3<f64> {
+    let nf = n as f64;
+    let t_mean = samples.iter().map(|s| s.0).sum::<f64>() / nf;
+    let w_mean = samples.iter().map(|s| s.1).sum::<Vector3<f64>>() / nf;
+    let stt: f64 = samples.iter().map(|s| (s.0 - t_mean).powi(2)).sum();
+    if stt <= 0.0 {
+        return w_mean;
+    }
+    let slope = samples
+        .iter()
+        .map(|s| (s.1 - w_mean) * (s.0 - t_mean))
+        .sum::<Vector3<f64>>()
+        / stt;
+    w_mean - slope * t_mean
 }
