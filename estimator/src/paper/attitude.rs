@@ -8,12 +8,24 @@
 //!
 //! The pseudo-attitude of eq. (34) is a running sum: its error is the error of its starting value
 //! plus every video delta's error so far, i.e. a random walk shared by all the pseudo-attitudes of
-//! one chain, not white noise. Fusing each one as an independent measurement (the first reading)
-//! re-uses the same error at every frame and makes the filter overconfident. Here that error is a
-//! state `c` (the textbook augmentation for time-correlated measurement noise), so the state is
-//! `[δφ δθ δψ | c]` (6), the pseudo-attitude is `z = e + c` exactly, `c` starts as minus the
-//! filter's own error at the chain's start (the "initial known value" is the filter's estimate)
-//! and grows by each video delta's covariance.
+//! one chain, not white noise. Fusing each one as an independent measurement re-uses the same error
+//! at every frame and makes the filter overconfident, so that error is a state `η` (the textbook
+//! augmentation for time-correlated measurement noise): the state is `[δφ δθ δψ | η]` (6).
+//!
+//! In which frame is the chain's error constant? The chain is `Ĉ_k = Ĉ_0 D̂_1 ⋯ D̂_k` with
+//! `D̂_i = D_i Exp(ε_i)` (`D_i = C_{i−1}ᵀ C_i` the true body delta, `ε_i` its error in body-i axes)
+//! and `Ĉ_0 = Exp(η_0) C_0`. Since `C_i Exp(ε_i) = Exp(C_i ε_i) C_i`, every error moves to the left:
+//! `Ĉ_k = Exp(η_0) Exp(C_1 ε_1) ⋯ Exp(C_k ε_k) C_k ≈ Exp(η_k) C_k` with
+//! `η_k = η_0 + Σ_i C_i ε_i` (eq. C1). So the error is a rotation vector fixed in the NAVIGATION
+//! frame: it changes only by the new deltas' errors, not when the vehicle turns. Its Euler-angle
+//! image is `δe = J(φ,θ) Cᵀ η` (eq. C2, the right perturbation `C Exp(β)` moves the Euler angles by
+//! `J β` as a body rate does in eq. 31, and `β = Cᵀ η`): a heading change rotates a constant `η`
+//! from roll into pitch. Keeping the error as constant Euler angles (the previous reading) ascribed
+//! a tilt error made while flying north to roll even after a 90° turn, where it is pitch.
+//!
+//! For the same reason the filter's own Euler-angle error is propagated with the linearized eq. (31)
+//! (`F = I + ∂(J ω)/∂e · dt`, eq. F1), not `F = I`: with error-free gyros `δe` obeys exactly that
+//! equation, and it is what turns a roll error into a pitch error through a turn.
 
 use std::collections::VecDeque;
 
@@ -30,7 +42,7 @@ const HISTORY_NS: i64 = 2_000_000_000;
 /// rad².
 const PSEUDO_FLOOR_VAR: f64 = 1e-12;
 
-/// 6×6 covariance of `[δe; c]`.
+/// 6×6 covariance of `[δe; η]`.
 pub type AttCov = SMatrix<f64, 6, 6>;
 
 /// The attitude filter.
@@ -38,14 +50,15 @@ pub type AttCov = SMatrix<f64, 6, 6>;
 pub struct AttitudeEkf {
     /// Roll, pitch, yaw, rad.
     pub euler: Vector3<f64>,
-    /// Covariance of `[δe; c]`: Euler-angle error (rad²) and the pseudo-attitude chain error.
+    /// Covariance of `[δe; η]`: Euler-angle error (rad²) and the pseudo-attitude chain error (NED
+    /// rotation vector, rad²).
     pub p: AttCov,
     /// Time of validity, ns.
     pub t_ns: i64,
     hist: VecDeque<(i64, Vector3<f64>)>,
     /// The video pseudo-attitude (eq. 34) and the frame time it refers to.
     pseudo: Option<(i64, UnitQuaternion<f64>)>,
-    /// Estimate of the pseudo-attitude chain's error `c` (Euler angles, rad).
+    /// Estimate of the pseudo-attitude chain's error `η` (rotation vector in NED, rad; eq. C1).
     chain: Vector3<f64>,
 }
 
@@ -84,7 +97,7 @@ impl AttitudeEkf {
         Rotation3::from_euler_angles(self.euler.x, self.euler.y, self.euler.z).into_inner()
     }
 
-    /// Eq. (31) over `dt_s` with the mean raw gyro (Earth rate removed).
+    /// Eq. (31) over `dt_s` with the mean raw gyro (Earth rate removed), covariance with eq. (F1).
     pub fn predict(
         &mut self,
         gyro: &Vector3<f64>,
@@ -95,12 +108,20 @@ impl AttitudeEkf {
     ) {
         let w_nb = gyro - self.rotation().transpose() * w_ie;
         let j = euler_rate_matrix(self.euler.x, self.euler.y);
+        // Linearized at the attitude at the start of the step, like the mean-value propagation.
+        let f = Matrix3::identity() + euler_rate_jacobian(&self.euler, &w_nb) * dt_s;
         self.euler += j * w_nb * dt_s;
         self.euler.z = wrap_pi(self.euler.z);
         self.euler.x = wrap_pi(self.euler.x);
         let q = j * j.transpose() * (gyro_psd * dt_s);
-        let mut pee = self.p.fixed_view_mut::<3, 3>(0, 0);
-        pee += q;
+        // η is constant between frames (eq. C1): only the δe rows change.
+        let pee = f * self.p.fixed_view::<3, 3>(0, 0) * f.transpose() + q;
+        let pec = f * self.p.fixed_view::<3, 3>(0, 3);
+        self.p.fixed_view_mut::<3, 3>(0, 0).copy_from(&pee);
+        self.p.fixed_view_mut::<3, 3>(0, 3).copy_from(&pec);
+        self.p
+            .fixed_view_mut::<3, 3>(3, 0)
+            .copy_from(&pec.transpose());
         self.t_ns = t_ns;
         self.hist.push_back((t_ns, self.euler));
         while self.hist.front().is_some_and(|h| t_ns - h.0 > HISTORY_NS) {
@@ -124,7 +145,7 @@ impl AttitudeEkf {
             .map(|e| Rotation3::from_euler_angles(e.x, e.y, e.z).into_inner())
     }
 
-    /// Gated EKF update of a 3-D measurement with innovation `y`, Jacobian `h` w.r.t. `[δe; c]`
+    /// Gated EKF update of a 3-D measurement with innovation `y`, Jacobian `h` w.r.t. `[δe; η]`
     /// and noise `r`. Returns whether it was fused.
     fn update(
         &mut self,
@@ -199,7 +220,8 @@ impl AttitudeEkf {
     }
 
     /// Eq. (34): accumulates the video delta-attitude into the pseudo-attitude (restarting from the
-    /// filter's attitude at frame 0 when the chain of frames breaks) and fuses it as `z = e + c`.
+    /// filter's attitude at frame 0 when the chain of frames breaks) and fuses it as
+    /// `z = Euler(Exp(η) C(e))` (eqs. C1–C2).
     pub fn video_update(
         &mut self,
         m: &Egomotion,
@@ -215,8 +237,10 @@ impl AttitudeEkf {
             Some((t, q)) if t == m.t0_ns => Some(q),
             _ => {
                 // A new chain starts from the filter's attitude at frame 0 (the "initial known
-                // value"), once the filter is aligned: c = ê − e = −δe, so cov(c) = P_ee and
-                // cov(δe, c) = −P_ee (the process noise since frame 0 is neglected).
+                // value"), once the filter is aligned. Its error is the filter's: in Euler angles
+                // ê − e = −δe, as a NED rotation vector (inverse of eq. C2) η_0 = −T δe with
+                // T = C J(φ,θ)⁻¹, so cov(η) = T P_ee Tᵀ and cov(δe, η) = −P_ee Tᵀ (the process
+                // noise since frame 0 is neglected).
                 self.pseudo = None;
                 let pee = self.p_euler();
                 if pee.diagonal().max() > start_sigma_rad.powi(2) {
@@ -225,39 +249,84 @@ impl AttitudeEkf {
                 let Some(e0) = self.euler_at(m.t0_ns) else {
                     return;
                 };
+                let Some(j_inv) = euler_rate_matrix(e0.x, e0.y).try_inverse() else {
+                    return;
+                };
+                let t = Rotation3::from_euler_angles(e0.x, e0.y, e0.z).into_inner() * j_inv;
                 self.chain = Vector3::zeros();
-                self.p.fixed_view_mut::<3, 3>(3, 3).copy_from(&pee);
-                self.p.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-pee));
-                self.p.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-pee));
+                let pec = -pee * t.transpose();
+                self.p
+                    .fixed_view_mut::<3, 3>(3, 3)
+                    .copy_from(&(t * pee * t.transpose()));
+                self.p.fixed_view_mut::<3, 3>(0, 3).copy_from(&pec);
+                self.p
+                    .fixed_view_mut::<3, 3>(3, 0)
+                    .copy_from(&pec.transpose());
                 Some(UnitQuaternion::from_euler_angles(e0.x, e0.y, e0.z))
             }
         };
         let Some(q0) = base else { return };
         // nav_from_b1 = nav_from_b0 · b0_from_b1. A small error δθ of the video rotation (camera
-        // axes) perturbs q1 by R_bc δθ in body-1 axes, i.e. the Euler angles by J(φ,θ) R_bc δθ.
+        // axes) is the error R_bc δθ in body-1 axes (ε of eq. C1), i.e. C_1 R_bc δθ in NED.
         let q1 = q0 * b1_from_b0.inverse();
         let (r, p, y) = q1.euler_angles();
         let z = Vector3::new(r, p, y);
-        let rbc = r_bc.to_rotation_matrix().into_inner();
-        let j = euler_rate_matrix(r, p);
+        let nav_from_cam =
+            q1.to_rotation_matrix().into_inner() * r_bc.to_rotation_matrix().into_inner();
         // `cov_scale`: the allowance for the egomotion errors' time correlation (see
         // `EstimatorParams::vision_cov_scale`): the chain sums them, so its variance grows by the
-        // long-run (not the per-frame) variance of each delta.
-        let q_c = j * rbc * m.rot_cov * rbc.transpose() * j.transpose() * cov_scale;
+        // long-run (not the per-frame) variance of each delta. Eq. (C1): η grows by C_1 R_bc δθ.
+        let q_c = nav_from_cam * m.rot_cov * nav_from_cam.transpose() * cov_scale;
         let mut pcc = self.p.fixed_view_mut::<3, 3>(3, 3);
         pcc += q_c;
         self.pseudo = Some((m.t1_ns, q1));
+        // Predicted pseudo-attitude Exp(η̂) C(ê) at the frame time and its Jacobians: a change δe
+        // is the body-axis perturbation J(ê)⁻¹ δe, which moves the Euler angles of the product by
+        // J(ẑ) J(ê)⁻¹ δe; a change δη (NED, left) moves them by J(ẑ) C(ẑ)ᵀ δη (eq. C2; the left
+        // Jacobian of Exp at the sub-degree η is taken as I).
         let pred = self.euler_at(m.t1_ns).unwrap_or(self.euler);
-        let y = wrap3(z - pred - self.chain);
+        let c_pred = Rotation3::from_euler_angles(pred.x, pred.y, pred.z);
+        let z_pred_rot = Rotation3::new(self.chain) * c_pred;
+        let (zr, zp, zy) = z_pred_rot.euler_angles();
+        let z_pred = Vector3::new(zr, zp, zy);
+        let Some(j_pred_inv) = euler_rate_matrix(pred.x, pred.y).try_inverse() else {
+            return;
+        };
+        let j_z = euler_rate_matrix(zr, zp);
+        let y = wrap3(z - z_pred);
         let mut h = SMatrix::<f64, 3, 6>::zeros();
-        h.fixed_view_mut::<3, 3>(0, 0).fill_with_identity();
-        h.fixed_view_mut::<3, 3>(0, 3).fill_with_identity();
+        h.fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&(j_z * j_pred_inv));
+        h.fixed_view_mut::<3, 3>(0, 3)
+            .copy_from(&(j_z * z_pred_rot.matrix().transpose()));
         let r = Matrix3::identity() * PSEUDO_FLOOR_VAR;
         if !self.update(&y, &h, &r, gate, m.t1_ns, diag) {
             // The chain now carries an error its covariance does not describe: start a new one.
             self.pseudo = None;
         }
     }
+}
+
+/// Eq. (F1): `∂(J(φ,θ) ω)/∂(φ,θ,ψ)` of eq. (31). With `a = cφ ω_y − sφ ω_z` and
+/// `b = sφ ω_y + cφ ω_z`, `J ω = [ω_x + b tθ, a, b / cθ]`, so the rows are
+/// `[a tθ, b / cθ², 0]`, `[−b, 0, 0]`, `[a / cθ, b tθ / cθ, 0]` (no yaw dependence).
+pub fn euler_rate_jacobian(euler: &Vector3<f64>, w: &Vector3<f64>) -> Matrix3<f64> {
+    let (sr, cr) = euler.x.sin_cos();
+    let (sp, cp) = euler.y.sin_cos();
+    let tp = sp / cp;
+    let a = cr * w.y - sr * w.z;
+    let b = sr * w.y + cr * w.z;
+    Matrix3::new(
+        a * tp,
+        b / (cp * cp),
+        0.0,
+        -b,
+        0.0,
+        0.0,
+        a / cp,
+        b * tp / cp,
+        0.0,
+    )
 }
 
 /// `∂(C(φ,θ,ψ) u)/∂(φ,θ,ψ)` for a body vector `u`, with `C = R_z(ψ) R_y(θ) R_x(φ)`:
