@@ -433,3 +433,65 @@ fn paper_lever_arm_jacobian_matches_finite_differences() {
         assert!(err < 1e-6, "column {k}: {num:?} vs {:?}", h.column(k));
     }
 }
+
+/// Eq. (F1) of `paper::attitude`: `∂(J(φ,θ) ω)/∂(φ,θ,ψ)` of eq. (31) against central differences.
+#[test]
+fn paper_euler_rate_jacobian_matches_finite_differences() {
+    use uavnav_estimator::output::euler_rate_matrix;
+    use uavnav_estimator::paper::attitude::euler_rate_jacobian;
+    let e = Vector3::new(0.5, -0.3, 2.0);
+    let w = Vector3::new(0.2, -0.15, 0.3);
+    let f = |e: &Vector3<f64>| euler_rate_matrix(e.x, e.y) * w;
+    let got = euler_rate_jacobian(&e, &w);
+    let h = 1e-6;
+    for k in 0..3 {
+        let mut d = Vector3::zeros();
+        d[k] = h;
+        let num = (f(&(e + d)) - f(&(e - d))) / (2.0 * h);
+        assert!(
+            (got.column(k) - num).norm() < 1e-8,
+            "column {k}: {} vs {num}",
+            got.column(k)
+        );
+    }
+}
+
+/// Eqs. (C1)–(C2) of `paper::attitude`: the error of a chain of delta-rotations is a rotation
+/// fixed in the navigation frame (it does not change as the vehicle turns), and its Euler-angle
+/// image is `J(φ,θ) Cᵀ η`, which does change: a tilt error made heading north is a roll error
+/// there and a pitch error after a 90° turn.
+#[test]
+fn paper_chain_error_is_fixed_in_the_navigation_frame() {
+    use nalgebra::Rotation3;
+    use uavnav_estimator::output::euler_rate_matrix;
+    let c0 = Rotation3::from_euler_angles(0.1, 0.05, 0.0);
+    // Initial error η_0 (NED) and a turn of 90° in small body-axis deltas, each with no error.
+    let eta0 = Vector3::new(2e-3, -1e-3, 5e-4);
+    let delta = Rotation3::from_scaled_axis(Vector3::new(
+        0.01,
+        0.003,
+        std::f64::consts::FRAC_PI_2 / 50.0,
+    ));
+    let (mut c_true, mut c_chain) = (c0, Rotation3::new(eta0) * c0);
+    for _ in 0..50 {
+        c_true *= delta;
+        c_chain *= delta;
+    }
+    let eta = (c_chain * c_true.inverse()).scaled_axis();
+    assert!((eta - eta0).norm() < 1e-10, "η changed: {eta} vs {eta0}");
+    let euler = |c: &Rotation3<f64>| {
+        let (r, p, y) = c.euler_angles();
+        Vector3::new(r, p, y)
+    };
+    let de = euler(&c_chain) - euler(&c_true);
+    let e = euler(&c_true);
+    let predicted = euler_rate_matrix(e.x, e.y) * c_true.matrix().transpose() * eta0;
+    assert!(
+        // first order: the residual is O(|η|²)
+        (de - predicted).norm() < 1e-2 * eta0.norm(),
+        "Euler error {de} vs J Cᵀ η {predicted}"
+    );
+    // The Euler-angle error did change with the turn (what constant Euler angles would miss).
+    let de0 = euler(&(Rotation3::new(eta0) * c0)) - euler(&c0);
+    assert!((de - de0).norm() > 1e-3, "{de} vs {de0}");
+}
