@@ -82,6 +82,26 @@ impl Recording {
         self.period_ns
     }
 
+    /// The same stream with every sensor time `dt_ns` later: a later run can drive the vehicles
+    /// of an earlier one under the same ids, their sensor time going on forward.
+    pub fn later_by(&self, dt_ns: i64) -> Recording {
+        Recording {
+            messages: self
+                .messages
+                .iter()
+                .map(|m| TimedMessage {
+                    payload: shift_payload(&m.payload, dt_ns),
+                    last_t_ns: m.last_t_ns + dt_ns,
+                    ..m.clone()
+                })
+                .collect(),
+            t0_ns: self.t0_ns + dt_ns,
+            period_ns: self.period_ns,
+            imu_due: self.imu_due.clone(),
+            has_config: self.has_config,
+        }
+    }
+
     /// Messages per lap (without the configuration).
     pub fn messages_per_lap(&self) -> usize {
         self.messages.len() - usize::from(self.has_config)
@@ -119,6 +139,9 @@ impl Recording {
     /// Due offset of the IMU batch that carried sample `t_ns` (any lap), ns.
     pub fn due_of_sample(&self, t_ns: i64) -> Option<i64> {
         let rel = t_ns - self.t0_ns;
+        if rel < 0 {
+            return None; // an earlier run's sample (see `later_by`)
+        }
         let lap = rel.div_euclid(self.period_ns);
         let base = rel - lap * self.period_ns;
         let i = self.imu_due.partition_point(|(t, _)| *t < base);

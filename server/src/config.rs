@@ -103,6 +103,16 @@ pub struct Config {
     pub health: HealthConfig,
     /// Logging.
     pub log: LogConfig,
+    /// Foxglove live view.
+    pub foxglove: FoxgloveConfig,
+}
+
+/// Foxglove live view settings (a Foxglove WebSocket server showing every vehicle).
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct FoxgloveConfig {
+    /// Listen address `HOST:PORT` of the live view; absent = no live view (the default).
+    pub addr: Option<String>,
 }
 
 /// gRPC endpoint settings.
@@ -185,7 +195,8 @@ pub struct VehiclesConfig {
     pub idle_evict_s: f64,
     /// Inputs are fused in timestamp order within this window; older data is counted late, ms.
     pub reorder_window_ms: f64,
-    /// A sample more than this far ahead of the vehicle's latest sample is rejected, s.
+    /// A sample more than this far ahead of the vehicle's latest sample is rejected, s (plus the
+    /// wall time since that sample arrived: a stream resuming after a silence is taken back).
     pub max_future_s: f64,
     /// Capacity of each actor's sensor queue (IMU/GNSS batches); full = back-pressure, never shed.
     pub input_queue: usize,
@@ -314,6 +325,9 @@ pub struct Cli {
     /// JSON log lines.
     #[arg(long)]
     pub log_json: bool,
+    /// Serve a Foxglove live view (WebSocket) on this address, e.g. 127.0.0.1:8765 [default: off].
+    #[arg(long, value_name = "HOST:PORT")]
+    pub foxglove_addr: Option<String>,
 }
 
 /// Environment variables read by [`Config::load`], with the key each overrides.
@@ -329,6 +343,7 @@ pub const ENV_VARS: &[(&str, &str)] = &[
     ("UAVNAV_ZENOH_INSTANCE", "zenoh.instance"),
     ("UAVNAV_LOG_JSON", "log.json"),
     ("UAVNAV_LOG", "log.filter"),
+    ("UAVNAV_FOXGLOVE_ADDR", "foxglove.addr"),
 ];
 
 impl Config {
@@ -421,6 +436,9 @@ impl Config {
         if let Some(v) = env("UAVNAV_LOG") {
             self.log.filter = v;
         }
+        if let Some(v) = env("UAVNAV_FOXGLOVE_ADDR") {
+            self.foxglove.addr = Some(v).filter(|a| !a.is_empty());
+        }
         Ok(())
     }
 
@@ -449,6 +467,9 @@ impl Config {
         }
         if cli.log_json {
             self.log.json = true;
+        }
+        if let Some(a) = &cli.foxglove_addr {
+            self.foxglove.addr = Some(a.clone());
         }
     }
 

@@ -70,6 +70,8 @@ pub struct Ingestor {
     registry: Arc<Registry>,
     limits: ImageLimits,
     max_message_bytes: usize,
+    /// The Foxglove live view, shown every accepted GNSS fix and camera frame.
+    live: Option<crate::live::LiveTap>,
 }
 
 impl Ingestor {
@@ -79,7 +81,14 @@ impl Ingestor {
             registry,
             limits,
             max_message_bytes,
+            live: None,
         }
+    }
+
+    /// Shows accepted GNSS fixes and camera frames on a live view.
+    pub fn with_live_view(mut self, tap: crate::live::LiveTap) -> Self {
+        self.live = Some(tap);
+        self
     }
 
     /// Largest accepted encoded message, bytes.
@@ -243,6 +252,9 @@ impl Ingestor {
         )
         .await?;
         VehicleStats::add(&h.shared.stats.gnss, 1);
+        if let Some(live) = &self.live {
+            live.gnss(id, g);
+        }
         ctx.metrics
             .input(transport, Kind::Gnss, Outcome::Accepted, 1);
         h.shared
@@ -295,6 +307,9 @@ impl Ingestor {
             }
         }
         VehicleStats::add(&h.shared.stats.camera, 1);
+        if let Some(live) = &self.live {
+            live.camera(id, c);
+        }
         ctx.metrics
             .input(transport, Kind::Camera, Outcome::Accepted, 1);
         h.shared

@@ -19,6 +19,7 @@
 //! | [`grpc`] | the tonic `uavnav.v1.UavNav` service |
 //! | [`zenoh_io`] | the embedded Zenoh session: inputs, outputs, queryables, liveliness |
 //! | [`hub`] | broadcast fan-out of poses and health |
+//! | [`live`] | the Foxglove live view (WebSocket): pose, path, GNSS fix and camera per vehicle |
 //! | [`health`] | per-vehicle health reports |
 //! | [`metrics`] | Prometheus metrics |
 //! | [`http`] | `/metrics`, `/livez`, `/readyz` |
@@ -33,6 +34,7 @@ pub mod health;
 pub mod http;
 pub mod hub;
 pub mod ingest;
+pub mod live;
 pub mod logging;
 pub mod metrics;
 pub mod registry;

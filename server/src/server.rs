@@ -21,6 +21,7 @@ use crate::grpc::{UavNavService, remap_transport_status};
 use crate::http::{HttpState, router};
 use crate::hub::Hub;
 use crate::ingest::Ingestor;
+use crate::live::{LiveTap, LiveView};
 use crate::metrics::Metrics;
 use crate::registry::Registry;
 use crate::validate::ImageLimits;
@@ -51,6 +52,7 @@ pub struct RunningServer {
     grpc: (JoinHandle<()>, oneshot::Sender<()>),
     http: (JoinHandle<()>, oneshot::Sender<()>),
     pool: Arc<VisionPool>,
+    live: Option<LiveView>,
 }
 
 impl Server {
@@ -82,7 +84,18 @@ impl Server {
             max_bytes: config.vision.max_image_bytes,
             max_side_px: config.vision.max_image_side_px,
         };
-        let ingestor = Ingestor::new(Arc::clone(&registry), limits, config.grpc.max_message_bytes);
+        let mut ingestor =
+            Ingestor::new(Arc::clone(&registry), limits, config.grpc.max_message_bytes);
+        let live = match &config.foxglove.addr {
+            Some(addr) => {
+                let view = LiveView::start(addr).await?;
+                ingestor = ingestor.with_live_view(view.tap());
+                tokio::spawn(forward_poses(hub.clone(), view.tap()));
+                info!(port = view.port(), "Foxglove live view serving");
+                Some(view)
+            }
+            None => None,
+        };
 
         let zenoh = if config.zenoh.enabled {
             Some(ZenohIo::start(&config.zenoh, ingestor.clone(), hub.clone()).await?)
@@ -118,7 +131,24 @@ impl Server {
             grpc,
             http,
             pool,
+            live,
         })
+    }
+}
+
+/// Shows every pose on the live view until shutdown (a lagging view skips poses, counted by the tap).
+async fn forward_poses(hub: Hub, tap: LiveTap) {
+    let mut poses = hub.poses.subscribe();
+    let mut stopping = hub.stopping.clone();
+    loop {
+        tokio::select! {
+            p = poses.recv() => match p {
+                Ok(p) => tap.pose(p),
+                Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => {}
+                Err(tokio::sync::broadcast::error::RecvError::Closed) => break,
+            },
+            _ = stopping.changed() => break,
+        }
     }
 }
 
@@ -202,6 +232,11 @@ impl RunningServer {
         &self.registry
     }
 
+    /// The port of the Foxglove live view, when one is configured.
+    pub fn foxglove_port(&self) -> Option<u16> {
+        self.live.as_ref().map(LiveView::port)
+    }
+
     /// The metrics.
     pub fn metrics(&self) -> &Metrics {
         &self.registry.ctx().metrics
@@ -236,6 +271,9 @@ impl RunningServer {
         let (http_task, http_stop) = self.http;
         let _ = http_stop.send(());
         let _ = tokio::time::timeout(SERVE_DRAIN, http_task).await;
+        if let Some(view) = self.live.take() {
+            view.stop().await;
+        }
         let pool = Arc::clone(&self.pool);
         let _ = tokio::task::spawn_blocking(move || pool.shutdown()).await;
         info!("shutdown complete");

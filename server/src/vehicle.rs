@@ -81,26 +81,38 @@ pub enum GateRefusal {
 #[derive(Debug, Default)]
 pub struct TimeGate {
     newest_ns: Option<i64>,
+    /// Service wall clock when `newest_ns` was admitted.
+    newest_wall_ns: i64,
     last_ns: [Option<i64>; 3],
 }
 
 impl TimeGate {
-    /// Checks `t_ns` for `kind` and records it when accepted.
+    /// Checks `t_ns` for `kind`, arriving at service wall time `wall_ns`, and records it when
+    /// accepted.
+    ///
+    /// "Too far ahead" is judged against the newest sample *plus the wall time elapsed since it
+    /// arrived*: a vehicle whose link dropped for a minute resumes a minute later in its own time,
+    /// and must be taken back, while a timestamp from the far future in a running stream is not.
     pub fn admit(
         &mut self,
         kind: InputKind,
         t_ns: i64,
+        wall_ns: i64,
         window_ns: i64,
         max_future_ns: i64,
         field: impl Fn() -> String,
     ) -> Result<(), GateRefusal> {
         if let Some(newest) = self.newest_ns {
-            if t_ns > newest.saturating_add(max_future_ns) {
+            let silent_ns = wall_ns.saturating_sub(self.newest_wall_ns).max(0);
+            let limit_ns = max_future_ns.saturating_add(silent_ns);
+            if t_ns > newest.saturating_add(limit_ns) {
                 return Err(GateRefusal::Future(format!(
-                    "{}: t_ns {t_ns} is {:.3} s ahead of the vehicle's newest sample (limit {:.3} s)",
+                    "{}: t_ns {t_ns} is {:.3} s ahead of the vehicle's newest sample (limit {:.3} s: {:.3} s + {:.3} s without input)",
                     field(),
                     (t_ns - newest) as f64 * 1e-9,
-                    max_future_ns as f64 * 1e-9
+                    limit_ns as f64 * 1e-9,
+                    max_future_ns as f64 * 1e-9,
+                    silent_ns as f64 * 1e-9
                 )));
             }
             if t_ns < newest.saturating_sub(window_ns) {
@@ -119,7 +131,10 @@ impl TimeGate {
             )));
         }
         self.last_ns[kind as usize] = Some(t_ns);
-        self.newest_ns = Some(self.newest_ns.map_or(t_ns, |n| n.max(t_ns)));
+        if self.newest_ns.is_none_or(|n| t_ns > n) {
+            self.newest_ns = Some(t_ns);
+            self.newest_wall_ns = wall_ns;
+        }
         Ok(())
     }
 
@@ -179,7 +194,7 @@ impl VehicleShared {
         field: impl Fn() -> String,
     ) -> Result<(), GateRefusal> {
         let mut gate = self.gate.lock().unwrap_or_else(|p| p.into_inner());
-        gate.admit(kind, t_ns, window_ns, max_future_ns, field)
+        gate.admit(kind, t_ns, wall_ns(), window_ns, max_future_ns, field)
     }
 
     /// The configured camera, if any.
@@ -220,29 +235,56 @@ mod tests {
         let mut g = TimeGate::default();
         let (w, f) = (100, 1_000);
         assert!(
-            g.admit(InputKind::Imu, 1_000, w, f, || "imu".into())
+            g.admit(InputKind::Imu, 1_000, 0, w, f, || "imu".into())
                 .is_ok()
         );
         assert!(matches!(
-            g.admit(InputKind::Imu, 1_000, w, f, || "imu".into()),
+            g.admit(InputKind::Imu, 1_000, 0, w, f, || "imu".into()),
             Err(GateRefusal::Late(_))
         ));
         assert!(
-            g.admit(InputKind::Gnss, 950, w, f, || "gnss".into())
+            g.admit(InputKind::Gnss, 950, 0, w, f, || "gnss".into())
                 .is_ok(),
             "within the window"
         );
         assert!(matches!(
-            g.admit(InputKind::Gnss, 800, w, f, || "gnss".into()),
+            g.admit(InputKind::Gnss, 800, 0, w, f, || "gnss".into()),
             Err(GateRefusal::Late(_))
         ));
         assert!(matches!(
-            g.admit(InputKind::Imu, 3_000, w, f, || "imu".into()),
+            g.admit(InputKind::Imu, 3_000, 0, w, f, || "imu".into()),
             Err(GateRefusal::Future(_))
         ));
         assert!(
-            g.admit(InputKind::Imu, 1_900, w, f, || "imu".into())
+            g.admit(InputKind::Imu, 1_900, 0, w, f, || "imu".into())
                 .is_ok()
         );
+    }
+
+    #[test]
+    fn gate_takes_a_stream_back_after_a_silence_as_long_as_the_jump() {
+        let mut g = TimeGate::default();
+        let (w, f) = (20_000_000, 10_000_000_000); // 20 ms window, 10 s ahead at most
+        let s = 1_000_000_000i64;
+        assert!(
+            g.admit(InputKind::Imu, 100 * s, 0, w, f, || "imu".into())
+                .is_ok()
+        );
+        // 60 s later in the vehicle's time, but only 1 s later on the wall clock: refused...
+        let err = g.admit(InputKind::Imu, 160 * s, s, w, f, || "imu".into());
+        assert!(
+            matches!(err, Err(GateRefusal::Future(ref m)) if m.contains("without input")),
+            "{err:?}"
+        );
+        // ...after 55 s of silence it is a link that came back: taken.
+        assert!(
+            g.admit(InputKind::Imu, 160 * s, 55 * s, w, f, || "imu".into())
+                .is_ok()
+        );
+        // A running stream still cannot jump ahead.
+        let err = g.admit(InputKind::Imu, 200 * s, 55 * s + 5_000_000, w, f, || {
+            "imu".into()
+        });
+        assert!(matches!(err, Err(GateRefusal::Future(_))), "{err:?}");
     }
 }

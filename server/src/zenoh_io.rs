@@ -417,6 +417,7 @@ async fn publish_outputs(
     mut done: oneshot::Receiver<()>,
 ) {
     let metrics = ingestor.registry().ctx().metrics.clone();
+    let watched = PoseSubscribers::declare(&session).await;
     let out = Outputs {
         session,
         pose_enc: encoding("uavnav.v1.PoseEstimate"),
@@ -433,7 +434,8 @@ async fn publish_outputs(
                 Err(broadcast::error::RecvError::Closed) => break,
             },
             r = poses.recv() => match r {
-                Ok(p) => out.pose(&p).await,
+                Ok(p) if watched.any() => out.pose(&p).await,
+                Ok(_) => {}
                 Err(broadcast::error::RecvError::Lagged(n)) => {
                     metrics.zenoh_output_lagged.inc_by(n);
                 }
@@ -447,6 +449,63 @@ async fn publish_outputs(
     }
     while let Ok(h) = health.try_recv() {
         out.health(&h).await;
+    }
+}
+
+/// Whether any Zenoh subscriber anywhere matches some vehicle's `pose` key. Poses come at IMU rate
+/// for the whole fleet: when nobody subscribes, encoding and routing each one would cost more than
+/// estimating it. (Health, at 1 Hz per vehicle, is always published.)
+struct PoseSubscribers {
+    any: Arc<std::sync::atomic::AtomicBool>,
+    /// Kept for its matching listener (declared on the wildcard key, never put on).
+    _publisher: Option<zenoh::pubsub::Publisher<'static>>,
+}
+
+impl PoseSubscribers {
+    async fn declare(session: &Session) -> Self {
+        use std::sync::atomic::{AtomicBool, Ordering};
+        let key = format!("{VEHICLE_PREFIX}/*/pose");
+        let any = Arc::new(AtomicBool::new(true));
+        // Remote subscribers only: the service's own input subscriber (`uavnav/v1/vehicle/*/*`)
+        // matches this key too, and it never wants poses.
+        let publisher = match session
+            .declare_publisher(key.clone())
+            .allowed_destination(zenoh::sample::Locality::Remote)
+            .await
+        {
+            Ok(p) => p,
+            Err(e) => {
+                // Without the listener, publish every pose (correct, only slower).
+                warn!(key, error = %e, "no pose matching listener; publishing every pose");
+                return Self {
+                    any,
+                    _publisher: None,
+                };
+            }
+        };
+        let flag = Arc::clone(&any);
+        let listener = publisher
+            .matching_listener()
+            .callback(move |s| flag.store(s.matching(), Ordering::Relaxed))
+            .background()
+            .await;
+        match (listener, publisher.matching_status().await) {
+            (Ok(()), Ok(status)) => any.store(status.matching(), Ordering::Relaxed),
+            (l, s) => warn!(
+                key,
+                listener = ?l.err(),
+                status = ?s.err(),
+                "pose matching status unavailable; publishing every pose"
+            ),
+        }
+        Self {
+            any,
+            _publisher: Some(publisher),
+        }
+    }
+
+    fn any(&self) -> bool {
+        self.any.load(std::sync::atomic::Ordering::Relaxed)
     }
 }
 
@@ -483,6 +542,8 @@ impl Outputs {
             .session
             .put(&key, body)
             .encoding(enc.clone())
+            // Not to this session's own input subscriber (`*/*` matches `*/pose`): only others.
+            .allowed_destination(zenoh::sample::Locality::Remote)
             .congestion_control(zenoh::qos::CongestionControl::Block);
         if let Err(e) = put.await {
             debug!(key, error = %e, "zenoh put failed");

@@ -37,6 +37,10 @@ impl Engine for EchoEngine {
                 step.poses.push(pb::PoseEstimate {
                     t_ns: s.t_ns,
                     position,
+                    nav_from_body: Some(pb::Quaternion {
+                        w: 1.0,
+                        ..Default::default()
+                    }),
                     mode: mode as i32,
                     ..Default::default()
                 });

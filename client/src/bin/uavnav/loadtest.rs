@@ -286,15 +286,14 @@ async fn ramp(
     let (mut lo, mut hi): (Option<usize>, Option<usize>) = (None, None);
     let mut n = args.vehicles;
     let mut stages = Vec::new();
+    // Every stage drives the same ids (vehicle `i` of a stage is vehicle `i` of the others), with
+    // sensor time going on from where the previous stage stopped: the service sees a fleet whose
+    // size changes, not a new fleet per stage (which would fill `vehicles.max_vehicles`).
+    let prefix = format!("{}{tag}-", args.id_prefix);
+    let stage_ns = (args.duration + Duration::from_secs(2)).as_nanos() as i64;
     for k in 0.. {
-        let o = stage(
-            client,
-            rec,
-            args,
-            n,
-            format!("{}{tag}s{k}-", args.id_prefix),
-        )
-        .await?;
+        let later = Arc::new(rec.later_by(k as i64 * stage_ns));
+        let o = stage(client, &later, args, n, prefix.clone()).await?;
         let report = Report::new(&o, target, camera, t);
         let p99_ms = report
             .latency_distribution

@@ -5,6 +5,11 @@
 //! diagnostics columns are 0 because the wire pose does not carry them (they are in the health
 //! stream). TUM: one line per pose in a local NED frame at each vehicle's first watched pose
 //! (use one `--vehicle`). MCAP: poses and health with the `uavnav.v1` schemas.
+//!
+//! `--foxglove [HOST:PORT]` serves a Foxglove live view of the watched vehicles (pose, path and,
+//! over Zenoh, the GNSS fixes and camera frames their publishers send; over gRPC only the service
+//! sees inputs: run `uavnavd --foxglove-addr` for those). With it, poses go to stdout only if
+//! `--out` says so.
 
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -12,8 +17,10 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::Context;
+use uavnav_client::keys::Leaf;
 use uavnav_client::{Selector, pb, posefmt};
 use uavnav_core::LocalFrame;
+use uavnavd::live::{LiveTap, LiveView};
 
 use crate::common::{CliError, CliResult};
 
@@ -55,10 +62,15 @@ pub struct Args {
     /// Stop when no pose arrived for this many seconds (after the first).
     #[arg(long)]
     pub idle_exit: Option<f64>,
+    /// Serve a Foxglove live view (WebSocket) on HOST:PORT [default when given: 127.0.0.1:8765].
+    #[arg(long, value_name = "HOST:PORT", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
+    pub foxglove: Option<String>,
 }
 
 /// Where poses go.
 enum Out {
+    /// Poses go to the live view only.
+    Nowhere,
     Csv(Box<dyn Write + Send>),
     Tum(Box<dyn Write + Send>, BTreeMap<String, LocalFrame>),
     Mcap(crate::record::McapSink),
@@ -99,6 +111,7 @@ impl Out {
 
     fn pose(&mut self, p: &pb::PoseEstimate) -> Result<(), CliError> {
         match self {
+            Out::Nowhere => {}
             Out::Csv(w) => {
                 if let Some(row) = posefmt::csv_row(p) {
                     writeln!(w, "{row}").map_err(CliError::runtime)?;
@@ -146,6 +159,7 @@ impl Out {
 
     fn finish(self) -> Result<(), CliError> {
         match self {
+            Out::Nowhere => Ok(()),
             Out::Csv(mut w) | Out::Tum(mut w, _) => w.flush().map_err(CliError::runtime),
             Out::Mcap(m) => m.finish(),
         }
@@ -162,10 +176,17 @@ fn selector(args: &Args) -> Selector {
 
 /// Runs the command until interrupted, `--count`, `--duration` or `--idle-exit`.
 pub fn run(args: Args) -> CliResult {
-    let mut out = Out::open(args.out.as_ref())?;
+    let mut out = match (&args.foxglove, &args.out) {
+        (Some(_), None) => Out::Nowhere,
+        _ => Out::open(args.out.as_ref())?,
+    };
     block_on(async move {
         let client = connect(&args.from).await?;
         let sel = selector(&args);
+        let live = match &args.foxglove {
+            Some(addr) => Some(start_live_view(addr, &client, &sel).await?),
+            None => None,
+        };
         let mut poses = client.watch_poses(sel.clone()).await.map_err(client_err)?;
         let mut health = if args.health {
             Some(
@@ -191,6 +212,9 @@ pub fn run(args: Args) -> CliResult {
                 p = poses.next() => match p {
                     Some(Ok(p)) => {
                         out.pose(&p)?;
+                        if let Some(view) = &live {
+                            view.tap().pose(std::sync::Arc::new(p));
+                        }
                         n += 1;
                         last = tokio::time::Instant::now();
                         if args.count.is_some_and(|c| n >= c) {
@@ -209,7 +233,73 @@ pub fn run(args: Args) -> CliResult {
         }
         out.finish()?;
         eprintln!("uavnav: {n} poses watched from {}", client.endpoint());
+        if let Some(view) = live {
+            let dropped = view.tap().dropped();
+            let shown = view.stop().await;
+            eprintln!(
+                "uavnav: live view showed {shown} vehicles ({dropped} messages dropped while it was behind)"
+            );
+        }
         client.close().await;
         Ok(())
     })
+}
+
+/// Starts the live view and, over Zenoh, a task that shows the watched vehicles' GNSS fixes and
+/// camera frames as their publishers send them.
+async fn start_live_view(
+    addr: &str,
+    client: &uavnav_client::Client,
+    sel: &Selector,
+) -> Result<LiveView, CliError> {
+    let view = LiveView::start(addr)
+        .await
+        .map_err(|e| CliError::runtime(anyhow::anyhow!("--foxglove: {e}")))?;
+    eprintln!(
+        "uavnav: Foxglove live view on ws://{}:{} (Foxglove app: Open connection)",
+        addr.rsplit_once(':').map_or(addr, |(h, _)| h),
+        view.port()
+    );
+    match client.zenoh_session() {
+        Some(session) => {
+            let sub = session
+                .declare_subscriber(uavnav_client::keys::ALL_VEHICLE_KEYS)
+                .await
+                .map_err(|e| CliError::runtime(anyhow::anyhow!("subscribing to inputs: {e}")))?;
+            let (tap, sel) = (view.tap(), sel.clone());
+            tokio::spawn(async move {
+                while let Ok(s) = sub.recv_async().await {
+                    show_input(&tap, &sel, s.key_expr().as_str(), &s.payload().to_bytes());
+                }
+            });
+        }
+        None => eprintln!(
+            "uavnav: note: over gRPC the live view shows poses and paths only (GNSS and camera: watch over zenoh, or run uavnavd --foxglove-addr)"
+        ),
+    }
+    Ok(view)
+}
+
+/// Shows one Zenoh input sample (GNSS or camera) of a watched vehicle; anything else is ignored.
+fn show_input(tap: &LiveTap, sel: &Selector, key: &str, bytes: &[u8]) {
+    use prost::Message;
+    let Some((id, leaf)) = uavnav_client::keys::split(key) else {
+        return;
+    };
+    if !sel.matches(id) {
+        return;
+    }
+    match leaf {
+        Leaf::Gnss => {
+            if let Ok(f) = pb::GnssFix::decode(bytes) {
+                tap.gnss(id, &f);
+            }
+        }
+        Leaf::Camera => {
+            if let Ok(f) = pb::CameraFrame::decode(bytes) {
+                tap.camera(id, &f);
+            }
+        }
+        _ => {}
+    }
 }

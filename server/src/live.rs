@@ -1,0 +1,318 @@
+//! Foxglove live view: a Foxglove WebSocket server (the `foxglove` crate's) that shows each
+//! vehicle's pose, path, GNSS fix and camera image while they stream. `uavnavd --foxglove-addr`
+//! feeds it from the service (every input transport, every pose); `uavnav watch --foxglove` feeds
+//! it from what a client watches.
+//!
+//! Topics per vehicle `{id}` (open the Foxglove app, "Open connection", `ws://HOST:PORT`):
+//!
+//! | topic | schema | content |
+//! |---|---|---|
+//! | `/vehicle/{id}/pose` | `foxglove.PoseInFrame` | the estimate (`nav_from_body`) in frame `ned` |
+//! | `/vehicle/{id}/path` | `foxglove.PosesInFrame` | its path: one pose per [`PATH_SPACING_NS`] of sensor time, the last [`PATH_MAX_POSES`] |
+//! | `/vehicle/{id}/estimate_fix` | `foxglove.LocationFix` | the estimate for the Map panel |
+//! | `/vehicle/{id}/gnss` | `foxglove.LocationFix` | GNSS fixes as received |
+//! | `/vehicle/{id}/camera` | `foxglove.CompressedImage` | camera frames as received (JPEG/PNG) |
+//!
+//! Frame `ned` is one local NED frame for the whole view, at the first position it sees, so the
+//! 3D panel places the vehicles of a fleet relative to each other. Message timestamps are sensor
+//! times; log times are the wall clock at publication (what a live view plots against).
+//!
+//! The view is a task that owns the scene; [`LiveTap`] is the cloneable, non-blocking handle the
+//! ingest path and the watchers use. When the view falls behind, messages are dropped (never the
+//! estimation) and counted in [`LiveTap::dropped`].
+
+use std::collections::{HashMap, VecDeque};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use foxglove::messages::{CompressedImage, LocationFix, Pose, PoseInFrame, PosesInFrame};
+use foxglove::{Channel, Context, WebSocketServer, WebSocketServerHandle};
+use tokio::sync::mpsc;
+use uavnav_core::{Lla, LocalFrame};
+use uavnav_proto::foxglove_conv;
+use uavnav_proto::v1 as pb;
+
+/// Sensor time between two poses of a vehicle's path, ns.
+pub const PATH_SPACING_NS: i64 = 500_000_000;
+/// Poses kept in a vehicle's path (500 s at [`PATH_SPACING_NS`]).
+pub const PATH_MAX_POSES: usize = 1000;
+/// Messages queued between the producers and the view task.
+pub const QUEUE_DEPTH: usize = 4096;
+
+/// Why the live view could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum LiveError {
+    /// The WebSocket server did not start (address in use, bad host...).
+    #[error("Foxglove WebSocket server on {addr}: {reason}")]
+    Start {
+        /// The address asked for.
+        addr: String,
+        /// The server's reason.
+        reason: String,
+    },
+    /// The address is not `HOST:PORT`.
+    #[error("Foxglove address {0:?}: expected HOST:PORT (e.g. 127.0.0.1:8765)")]
+    BadAddr(String),
+}
+
+/// What the view shows next.
+#[derive(Debug)]
+enum LiveMsg {
+    Pose(Arc<pb::PoseEstimate>),
+    Gnss(Arc<str>, pb::GnssFix),
+    Camera(Arc<str>, pb::CameraFrame),
+}
+
+/// The cloneable handle producers use: every call is a non-blocking send.
+#[derive(Debug, Clone)]
+pub struct LiveTap {
+    tx: mpsc::Sender<LiveMsg>,
+    dropped: Arc<AtomicU64>,
+}
+
+impl LiveTap {
+    fn send(&self, m: LiveMsg) {
+        if self.tx.try_send(m).is_err() {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// Shows a pose estimate.
+    pub fn pose(&self, p: Arc<pb::PoseEstimate>) {
+        self.send(LiveMsg::Pose(p));
+    }
+
+    /// Shows a GNSS fix of `vehicle_id`.
+    pub fn gnss(&self, vehicle_id: &str, f: &pb::GnssFix) {
+        self.send(LiveMsg::Gnss(vehicle_id.into(), f.clone()));
+    }
+
+    /// Shows a camera frame of `vehicle_id`.
+    pub fn camera(&self, vehicle_id: &str, f: &pb::CameraFrame) {
+        self.send(LiveMsg::Camera(vehicle_id.into(), f.clone()));
+    }
+
+    /// Messages dropped because the view was behind (or stopped).
+    pub fn dropped(&self) -> u64 {
+        self.dropped.load(Ordering::Relaxed)
+    }
+}
+
+/// A running live view.
+pub struct LiveView {
+    server: WebSocketServerHandle,
+    tap: LiveTap,
+    task: tokio::task::JoinHandle<Scene>,
+}
+
+impl std::fmt::Debug for LiveView {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LiveView")
+            .field("port", &self.server.port())
+            .finish_non_exhaustive()
+    }
+}
+
+impl LiveView {
+    /// Starts the WebSocket server on `addr` (`HOST:PORT`; port 0 picks a free port) and the view
+    /// task, on the current tokio runtime.
+    pub async fn start(addr: &str) -> Result<LiveView, LiveError> {
+        let (host, port) = split_addr(addr)?;
+        let ctx = Context::new();
+        let server = WebSocketServer::new()
+            .name("uavnav")
+            .bind(host, port)
+            .context(&ctx)
+            .start()
+            .await
+            .map_err(|e| LiveError::Start {
+                addr: addr.to_owned(),
+                reason: e.to_string(),
+            })?;
+        let (tx, rx) = mpsc::channel(QUEUE_DEPTH);
+        let tap = LiveTap {
+            tx,
+            dropped: Arc::new(AtomicU64::new(0)),
+        };
+        let task = tokio::spawn(run(Scene::new(ctx), rx));
+        Ok(LiveView { server, tap, task })
+    }
+
+    /// The port the server listens on.
+    pub fn port(&self) -> u16 {
+        self.server.port()
+    }
+
+    /// A handle to feed the view.
+    pub fn tap(&self) -> LiveTap {
+        self.tap.clone()
+    }
+
+    /// Stops the server once the queued messages are shown; returns how many vehicles were shown.
+    pub async fn stop(self) -> usize {
+        let LiveView { server, tap, task } = self;
+        drop(tap);
+        // Producers may still hold taps: give the task a moment, then stop regardless.
+        let shown = match tokio::time::timeout(std::time::Duration::from_secs(2), task).await {
+            Ok(Ok(scene)) => scene.vehicles.len(),
+            _ => 0,
+        };
+        server.stop().wait().await;
+        shown
+    }
+}
+
+fn split_addr(addr: &str) -> Result<(String, u16), LiveError> {
+    let bad = || LiveError::BadAddr(addr.to_owned());
+    let (host, port) = addr.rsplit_once(':').ok_or_else(bad)?;
+    let port: u16 = port.parse().map_err(|_| bad())?;
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    if host.is_empty() {
+        return Err(bad());
+    }
+    Ok((host.to_owned(), port))
+}
+
+async fn run(mut scene: Scene, mut rx: mpsc::Receiver<LiveMsg>) -> Scene {
+    while let Some(m) = rx.recv().await {
+        match m {
+            LiveMsg::Pose(p) => scene.pose(&p),
+            LiveMsg::Gnss(id, f) => scene.gnss(&id, &f),
+            LiveMsg::Camera(id, f) => scene.camera(&id, f),
+        }
+    }
+    scene
+}
+
+/// One vehicle's channels and path.
+struct VehicleView {
+    pose: Channel<PoseInFrame>,
+    path: Channel<PosesInFrame>,
+    estimate_fix: Channel<LocationFix>,
+    gnss: Channel<LocationFix>,
+    camera: Channel<CompressedImage>,
+    path_poses: VecDeque<Pose>,
+    last_path_t_ns: Option<i64>,
+}
+
+/// What the view task owns: the channels of every vehicle seen and the shared NED frame.
+struct Scene {
+    ctx: Arc<Context>,
+    frame: Option<LocalFrame>,
+    vehicles: HashMap<Arc<str>, VehicleView>,
+}
+
+impl Scene {
+    fn new(ctx: Arc<Context>) -> Self {
+        Self {
+            ctx,
+            frame: None,
+            vehicles: HashMap::new(),
+        }
+    }
+
+    fn vehicle(&mut self, id: &str) -> &mut VehicleView {
+        if !self.vehicles.contains_key(id) {
+            let topic = |leaf: &str| format!("/vehicle/{id}/{leaf}");
+            let ctx = &self.ctx;
+            let v = VehicleView {
+                pose: ctx.channel_builder(topic("pose")).build(),
+                path: ctx.channel_builder(topic("path")).build(),
+                estimate_fix: ctx.channel_builder(topic("estimate_fix")).build(),
+                gnss: ctx.channel_builder(topic("gnss")).build(),
+                camera: ctx.channel_builder(topic("camera")).build(),
+                path_poses: VecDeque::new(),
+                last_path_t_ns: None,
+            };
+            self.vehicles.insert(id.into(), v);
+        }
+        self.vehicles
+            .get_mut(id)
+            .unwrap_or_else(|| unreachable!("inserted above"))
+    }
+
+    fn pose(&mut self, p: &pb::PoseEstimate) {
+        // An estimate without a valid position or attitude (initialising) has nothing to draw.
+        let Some(lla) = p.position.as_ref().and_then(|g| Lla::try_from(g).ok()) else {
+            return;
+        };
+        let frame = *self.frame.get_or_insert_with(|| LocalFrame::new(lla));
+        let Ok(pose) = foxglove_conv::pose_in_frame(p, &frame) else {
+            return;
+        };
+        let v = self.vehicle(&p.vehicle_id);
+        v.pose.log(&pose);
+        v.estimate_fix.log(&estimate_fix(p, &lla));
+        let due = v
+            .last_path_t_ns
+            .is_none_or(|t| p.t_ns.saturating_sub(t) >= PATH_SPACING_NS);
+        if due && let Some(inner) = pose.pose.clone() {
+            v.last_path_t_ns = Some(p.t_ns);
+            if v.path_poses.len() == PATH_MAX_POSES {
+                v.path_poses.pop_front();
+            }
+            v.path_poses.push_back(inner);
+            if v.path.has_sinks() {
+                v.path.log(&PosesInFrame {
+                    timestamp: pose.timestamp,
+                    frame_id: pose.frame_id.clone(),
+                    poses: v.path_poses.iter().cloned().collect(),
+                });
+            }
+        }
+    }
+
+    fn gnss(&mut self, id: &str, f: &pb::GnssFix) {
+        // The ingest path validated it already; a client-side view may see anything.
+        if let Ok(fix) = foxglove_conv::location_fix_from_wire(f) {
+            self.vehicle(id).gnss.log(&fix);
+        }
+    }
+
+    fn camera(&mut self, id: &str, f: pb::CameraFrame) {
+        let Some(mut img) = f.image else { return };
+        img.timestamp = foxglove_conv::timestamp(f.t_ns);
+        if img.frame_id.is_empty() {
+            img.frame_id = foxglove_conv::camera_frame_id(f.camera_id);
+        }
+        self.vehicle(id).camera.log(&img);
+    }
+}
+
+/// The estimate as a map fix, with its horizontal and vertical σ when the pose carries them.
+fn estimate_fix(p: &pb::PoseEstimate, lla: &Lla) -> LocationFix {
+    let sigma = p.sigma_pos_ned_m.as_ref();
+    let (n, e, d) = sigma.map_or((0.0, 0.0, 0.0), |s| (s.x, s.y, s.z));
+    LocationFix {
+        timestamp: foxglove_conv::timestamp(p.t_ns),
+        frame_id: foxglove_conv::NED_FRAME_ID.to_owned(),
+        latitude: lla.lat_rad.to_degrees(),
+        longitude: lla.lon_rad.to_degrees(),
+        altitude: lla.alt_m,
+        // ENU diagonal: east, north, up.
+        position_covariance: vec![e * e, 0.0, 0.0, 0.0, n * n, 0.0, 0.0, 0.0, d * d],
+        position_covariance_type:
+            foxglove::messages::location_fix::PositionCovarianceType::DiagonalKnown as i32,
+        heading: None,
+        velocity: None,
+        color: None,
+        metadata: Vec::new(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn addresses() {
+        assert_eq!(
+            split_addr("127.0.0.1:8765").ok(),
+            Some(("127.0.0.1".to_owned(), 8765))
+        );
+        assert_eq!(split_addr("[::]:0").ok(), Some(("::".to_owned(), 0)));
+        assert!(split_addr("8765").is_err());
+        assert!(split_addr(":8765").is_err());
+        assert!(split_addr("host:port").is_err());
+    }
+}
