@@ -168,6 +168,9 @@ pub struct LoadParams {
     pub stagger: Duration,
     /// After the last send, how long to wait for outstanding poses.
     pub drain: Duration,
+    /// Counters the service already held for these ids before the run (an earlier run's
+    /// vehicles driven again, as `--ramp` does): subtracted from the run's own.
+    pub baseline: Arc<BTreeMap<String, pb::InputCounters>>,
 }
 
 impl Default for LoadParams {
@@ -180,6 +183,7 @@ impl Default for LoadParams {
             decimation: 1,
             stagger: Duration::from_secs(1),
             drain: Duration::from_secs(2),
+            baseline: Arc::default(),
         }
     }
 }
@@ -267,8 +271,10 @@ pub struct LoadOutcome {
     pub errors: BTreeMap<String, u64>,
     /// Messages sent but never acknowledged (gRPC).
     pub unacked: u64,
-    /// The service's counters.
+    /// The service's counters (this run's share).
     pub service: ServiceCounters,
+    /// Each vehicle's counters in its latest health report (cumulative since it was created).
+    pub final_counters: BTreeMap<String, pb::InputCounters>,
     /// Whether poses are expected at all (false for the discarding sink).
     pub expects_poses: bool,
 }
@@ -482,7 +488,11 @@ pub async fn run(
         foreign_poses: foreign,
         vehicles_with_poses: seen.iter().filter(|s| s.last_pose_t_ns.is_some()).count(),
         vehicles_behind: 0,
-        service: service_counters(&latest_health),
+        service: service_counters(&latest_health, &params.baseline),
+        final_counters: latest_health
+            .iter()
+            .filter_map(|(id, h)| Some((id.clone(), h.counters.clone()?)))
+            .collect(),
         expects_poses,
         params: params.clone(),
     };
@@ -597,16 +607,20 @@ async fn send_loop(
     (lag, vehicles.into_iter().zip(last_sent).collect(), elapsed)
 }
 
-fn service_counters(latest: &BTreeMap<String, pb::VehicleHealth>) -> ServiceCounters {
+fn service_counters(
+    latest: &BTreeMap<String, pb::VehicleHealth>,
+    baseline: &BTreeMap<String, pb::InputCounters>,
+) -> ServiceCounters {
     let mut c = ServiceCounters::default();
     for h in latest.values() {
         c.vehicles_reporting += 1;
         if let Some(k) = &h.counters {
-            c.accepted += k.accepted;
-            c.rejected += k.rejected;
-            c.late += k.late;
-            c.shed += k.shed;
-            c.dropped += k.dropped;
+            let b = baseline.get(&h.vehicle_id).cloned().unwrap_or_default();
+            c.accepted += k.accepted.saturating_sub(b.accepted);
+            c.rejected += k.rejected.saturating_sub(b.rejected);
+            c.late += k.late.saturating_sub(b.late);
+            c.shed += k.shed.saturating_sub(b.shed);
+            c.dropped += k.dropped.saturating_sub(b.dropped);
         }
     }
     c

@@ -620,6 +620,22 @@ async fn replay_and_watch_end_to_end() {
         "--duration".into(),
         "20".into(),
     ]));
+    // A Foxglove live view of rp-0 from a watcher, seen by a Foxglove WebSocket client.
+    let fox_port = free_port();
+    let w3 = tokio::spawn(run_async(vec![
+        "watch".into(),
+        "--from".into(),
+        svc.grpc.clone(),
+        "--vehicle".into(),
+        "rp-0".into(),
+        "--foxglove".into(),
+        format!("127.0.0.1:{fox_port}"),
+        "--idle-exit".into(),
+        "1.5".into(),
+        "--duration".into(),
+        "20".into(),
+    ]));
+    let fox = tokio::spawn(foxglove_first_pose(fox_port, "/vehicle/rp-0/pose"));
     tokio::time::sleep(Duration::from_millis(1500)).await;
     let out = run_async(vec![
         "replay".into(),
@@ -638,6 +654,18 @@ async fn replay_and_watch_end_to_end() {
     assert!(stdout(&out).starts_with("sent "));
     let (o1, o2) = (w1.await.unwrap(), w2.await.unwrap());
     assert_eq!((o1.status.code(), o2.status.code()), (Some(0), Some(0)));
+    let o3 = w3.await.unwrap();
+    assert_eq!(o3.status.code(), Some(0));
+    assert!(
+        o3.stdout.is_empty(),
+        "with --foxglove and no --out, nothing on stdout"
+    );
+    let err3 = String::from_utf8_lossy(&o3.stderr);
+    assert!(err3.contains("live view showed 1 vehicles"), "{err3}");
+    let pose = fox.await.unwrap();
+    assert_eq!(pose.frame_id, "ned");
+    let p = pose.pose.unwrap().position.unwrap();
+    assert!(p.x.is_finite() && p.x.abs() < 1e4, "{p:?}");
 
     let text = std::fs::read_to_string(&csv).unwrap();
     let mut lines = text.lines();
@@ -661,6 +689,53 @@ async fn replay_and_watch_end_to_end() {
     assert!(n_tum > 300, "{n_tum} TUM lines");
     assert!(tum_lines.lines().all(|l| l.split(' ').count() == 8));
     svc.server.shutdown().await.unwrap();
+}
+
+/// Connects to a Foxglove live view (retrying while it starts), subscribes to `topic` once it is
+/// advertised and returns the first message on it, decoded.
+async fn foxglove_first_pose(port: u16, topic: &str) -> foxglove::messages::PoseInFrame {
+    use futures::{SinkExt, StreamExt};
+    use prost::Message as _;
+    use tokio_tungstenite::tungstenite::{Message, client::IntoClientRequest};
+    let mut ws = None;
+    for _ in 0..100 {
+        let mut req = format!("ws://127.0.0.1:{port}")
+            .into_client_request()
+            .unwrap();
+        req.headers_mut()
+            .insert("Sec-WebSocket-Protocol", "foxglove.sdk.v1".parse().unwrap());
+        if let Ok((s, _)) = tokio_tungstenite::connect_async(req).await {
+            ws = Some(s);
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let mut ws = ws.expect("the live view accepts connections");
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(20);
+    while let Ok(Some(Ok(m))) = tokio::time::timeout_at(deadline, ws.next()).await {
+        match m {
+            Message::Text(t) => {
+                let v: serde_json::Value = serde_json::from_str(t.as_str()).unwrap();
+                if v["op"] != "advertise" {
+                    continue;
+                }
+                for c in v["channels"].as_array().unwrap() {
+                    if c["topic"] == topic {
+                        let sub = serde_json::json!({"op": "subscribe",
+                            "subscriptions": [{"id": 1, "channelId": c["id"]}]});
+                        ws.send(Message::Text(sub.to_string().into()))
+                            .await
+                            .unwrap();
+                    }
+                }
+            }
+            Message::Binary(b) if b.first() == Some(&1) && b.len() > 13 => {
+                return foxglove::messages::PoseInFrame::decode(&b[13..]).unwrap();
+            }
+            _ => {}
+        }
+    }
+    panic!("no {topic} message from the live view");
 }
 
 /// Poses recorded on `/uavnav/{vehicle}/pose` in an MCAP file: (t_ns, lat, lon, alt).

@@ -9,6 +9,7 @@
 //! pass the threshold; `--ramp` doubles N from `--vehicles` until
 //! it falls behind, bisects, and reports the largest N sustained.
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -170,6 +171,7 @@ async fn stage(
     args: &Args,
     vehicles: usize,
     prefix: String,
+    baseline: Arc<BTreeMap<String, pb::InputCounters>>,
 ) -> Result<LoadOutcome, CliError> {
     let params = LoadParams {
         vehicles,
@@ -177,6 +179,7 @@ async fn stage(
         id_prefix: prefix,
         streams: args.streams,
         decimation: args.decimation,
+        baseline,
         ..LoadParams::default()
     };
     let live = Arc::new(Live::default());
@@ -236,6 +239,7 @@ pub fn run(args: Args) -> CliResult {
                 &args,
                 args.vehicles,
                 format!("{}{tag}-", args.id_prefix),
+                Arc::default(),
             )
             .await?;
             let report = Report::new(&o, &target, camera, &thresholds);
@@ -291,9 +295,22 @@ async fn ramp(
     // size changes, not a new fleet per stage (which would fill `vehicles.max_vehicles`).
     let prefix = format!("{}{tag}-", args.id_prefix);
     let stage_ns = (args.duration + Duration::from_secs(2)).as_nanos() as i64;
+    // The service's counters of those vehicles so far, so each stage reports only its own.
+    let mut counters = BTreeMap::new();
     for k in 0.. {
         let later = Arc::new(rec.later_by(k as i64 * stage_ns));
-        let o = stage(client, &later, args, n, prefix.clone()).await?;
+        let baseline = Arc::new(std::mem::take(&mut counters));
+        let o = stage(
+            client,
+            &later,
+            args,
+            n,
+            prefix.clone(),
+            Arc::clone(&baseline),
+        )
+        .await?;
+        counters = Arc::unwrap_or_clone(baseline);
+        counters.extend(o.final_counters.clone());
         let report = Report::new(&o, target, camera, t);
         let p99_ms = report
             .latency_distribution
