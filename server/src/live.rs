@@ -23,10 +23,10 @@
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use foxglove::messages::{CompressedImage, LocationFix, Pose, PoseInFrame, PosesInFrame};
 use foxglove::{Channel, Context, WebSocketServer, WebSocketServerHandle};
+use prometheus_client::metrics::counter::Counter;
 use tokio::sync::mpsc;
 use uavnav_core::{Lla, LocalFrame};
 use uavnav_proto::foxglove_conv;
@@ -67,13 +67,13 @@ enum LiveMsg {
 #[derive(Debug, Clone)]
 pub struct LiveTap {
     tx: mpsc::Sender<LiveMsg>,
-    dropped: Arc<AtomicU64>,
+    dropped: Counter,
 }
 
 impl LiveTap {
     fn send(&self, m: LiveMsg) {
         if self.tx.try_send(m).is_err() {
-            self.dropped.fetch_add(1, Ordering::Relaxed);
+            self.dropped.inc();
         }
     }
 
@@ -84,7 +84,7 @@ impl LiveTap {
 
     /// Shows a GNSS fix of `vehicle_id`.
     pub fn gnss(&self, vehicle_id: &str, f: &pb::GnssFix) {
-        self.send(LiveMsg::Gnss(vehicle_id.into(), f.clone()));
+        self.send(LiveMsg::Gnss(vehicle_id.into(), *f));
     }
 
     /// Shows a camera frame of `vehicle_id`.
@@ -92,9 +92,14 @@ impl LiveTap {
         self.send(LiveMsg::Camera(vehicle_id.into(), f.clone()));
     }
 
+    /// Counts `n` messages lost before they reached the tap (e.g. a lagging pose feed).
+    pub fn count_dropped(&self, n: u64) {
+        self.dropped.inc_by(n);
+    }
+
     /// Messages dropped because the view was behind (or stopped).
     pub fn dropped(&self) -> u64 {
-        self.dropped.load(Ordering::Relaxed)
+        self.dropped.get()
     }
 }
 
@@ -115,8 +120,9 @@ impl std::fmt::Debug for LiveView {
 
 impl LiveView {
     /// Starts the WebSocket server on `addr` (`HOST:PORT`; port 0 picks a free port) and the view
-    /// task, on the current tokio runtime.
-    pub async fn start(addr: &str) -> Result<LiveView, LiveError> {
+    /// task, on the current tokio runtime. Messages it drops are counted in `dropped` (e.g. the
+    /// service's `uavnav_foxglove_dropped_total`).
+    pub async fn start(addr: &str, dropped: Counter) -> Result<LiveView, LiveError> {
         let (host, port) = split_addr(addr)?;
         let ctx = Context::new();
         let server = WebSocketServer::new()
@@ -130,10 +136,7 @@ impl LiveView {
                 reason: e.to_string(),
             })?;
         let (tx, rx) = mpsc::channel(QUEUE_DEPTH);
-        let tap = LiveTap {
-            tx,
-            dropped: Arc::new(AtomicU64::new(0)),
-        };
+        let tap = LiveTap { tx, dropped };
         let task = tokio::spawn(run(Scene::new(ctx), rx));
         Ok(LiveView { server, tap, task })
     }
@@ -246,7 +249,7 @@ impl Scene {
         let due = v
             .last_path_t_ns
             .is_none_or(|t| p.t_ns.saturating_sub(t) >= PATH_SPACING_NS);
-        if due && let Some(inner) = pose.pose.clone() {
+        if due && let Some(inner) = pose.pose {
             v.last_path_t_ns = Some(p.t_ns);
             if v.path_poses.len() == PATH_MAX_POSES {
                 v.path_poses.pop_front();

@@ -123,6 +123,8 @@ pub struct Metrics {
     pub zenoh_output_lagged: Counter,
     /// Samples received on the Zenoh input key expressions (before decoding).
     pub zenoh_samples: Counter,
+    /// Messages the Foxglove live view skipped because it was behind.
+    pub foxglove_dropped: Counter,
 }
 
 impl Metrics {
@@ -143,6 +145,7 @@ impl Metrics {
         let engine_errors = Counter::default();
         let zenoh_output_lagged = Counter::default();
         let zenoh_samples = Counter::default();
+        let foxglove_dropped = Counter::default();
         registry.register(
             "inputs",
             "Sensor inputs by transport, kind and outcome",
@@ -205,6 +208,11 @@ impl Metrics {
             "Samples received on the Zenoh input key expressions, before decoding",
             zenoh_samples.clone(),
         );
+        registry.register(
+            "foxglove_dropped",
+            "Poses, GNSS fixes and camera frames the Foxglove live view skipped because it was behind",
+            foxglove_dropped.clone(),
+        );
         Self {
             registry: Arc::new(registry),
             inputs,
@@ -221,6 +229,7 @@ impl Metrics {
             engine_errors,
             zenoh_output_lagged,
             zenoh_samples,
+            foxglove_dropped,
         }
     }
 

@@ -88,7 +88,7 @@ impl Server {
             Ingestor::new(Arc::clone(&registry), limits, config.grpc.max_message_bytes);
         let live = match &config.foxglove.addr {
             Some(addr) => {
-                let view = LiveView::start(addr).await?;
+                let view = LiveView::start(addr, metrics.foxglove_dropped.clone()).await?;
                 ingestor = ingestor.with_live_view(view.tap());
                 tokio::spawn(forward_poses(hub.clone(), view.tap()));
                 info!(port = view.port(), "Foxglove live view serving");
@@ -144,7 +144,7 @@ async fn forward_poses(hub: Hub, tap: LiveTap) {
         tokio::select! {
             p = poses.recv() => match p {
                 Ok(p) => tap.pose(p),
-                Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => {}
+                Err(tokio::sync::broadcast::error::RecvError::Lagged(n)) => tap.count_dropped(n),
                 Err(tokio::sync::broadcast::error::RecvError::Closed) => break,
             },
             _ = stopping.changed() => break,

@@ -183,6 +183,11 @@ async fn live_view_shows_pose_path_gnss_and_camera_of_each_vehicle() {
         ("jpeg", "cam0")
     );
     assert_eq!(img.timestamp.map(|t| t.sec()), Some(1001));
+    assert_eq!(
+        server.metrics().foxglove_dropped.get(),
+        0,
+        "nothing skipped at this rate"
+    );
 
     server.shutdown().await.unwrap();
 }

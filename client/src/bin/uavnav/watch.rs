@@ -252,7 +252,7 @@ async fn start_live_view(
     client: &uavnav_client::Client,
     sel: &Selector,
 ) -> Result<LiveView, CliError> {
-    let view = LiveView::start(addr)
+    let view = LiveView::start(addr, Default::default())
         .await
         .map_err(|e| CliError::runtime(anyhow::anyhow!("--foxglove: {e}")))?;
     eprintln!(
