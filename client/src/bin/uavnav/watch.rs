@@ -47,7 +47,7 @@ pub struct Args {
     /// Keep one pose in N per vehicle.
     #[arg(long, default_value_t = 1)]
     pub decimation: u32,
-    /// Output file: `.csv`, `.tum` or `.mcap` (default: CSV on stdout).
+    /// Output file: `.csv`, `.tum` or `.mcap` (default: CSV on stdout; with --foxglove: none).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Also watch health (recorded in MCAP; one line per report on stderr otherwise).
