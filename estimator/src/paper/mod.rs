@@ -45,7 +45,7 @@ const GYRO_MEAN_NS: i64 = 100_000_000;
 const OUTAGE_AFTER_NS: i64 = 1_000_000_000;
 /// σ of the GNSS-derived tilt and course pseudo-measurements of the alignment, rad.
 const GNSS_TILT_SIGMA_RAD: f64 = 0.035;
-const GNSS_COURSE_SIGMA_RAD: f64 = 0.05;
+const GNSS_COURSE_FLOOR_RAD: f64 = 0.002;
 /// σ of the held speed of eq. (35) at the start of an outage, m/s, and its growth, m/s per s.
 const SPEED_SIGMA_MPS: f64 = 0.3;
 const SPEED_SIGMA_GROWTH_MPS_PER_S: f64 = 0.02;
@@ -253,11 +253,17 @@ impl PaperFilter {
             if att.p_euler().diagonal().max() <= start_var {
                 self.aligned = true;
             } else if f_mean.norm() > 1.0 {
+                // The course is that of the vehicle, not of the antenna: remove the lever-arm
+                // velocity C (ω × r) of eq. (33) (0.35 m/s for 2 m at 10 °/s, 0.7° of course).
+                let w_nb = gyro - att.rotation().transpose() * self.w_ie;
+                let v_body = meas.vel_ned_mps - att.rotation() * w_nb.cross(&self.lever_b);
+                let course_sigma = course_sigma_rad(meas.sigma_vel_mps, &v_body);
                 gnss_attitude_aiding(
                     att,
                     &f_mean,
                     &(g - a_n),
-                    &meas.vel_ned_mps,
+                    &v_body,
+                    course_sigma,
                     self.params.init_min_speed_mps,
                     self.params.gate_sigma,
                     &mut self.gnss_att_diag,
@@ -479,6 +485,7 @@ fn gnss_attitude_aiding(
     f_b: &Vector3<f64>,
     g_app_n: &Vector3<f64>,
     vel_n: &Vector3<f64>,
+    course_sigma: f64,
     min_speed: f64,
     gate: f64,
     diag: &mut crate::aid_sources::InnovDiag,
@@ -498,9 +505,16 @@ fn gnss_attitude_aiding(
     } else {
         y
     };
-    let course_sigma = if moving { GNSS_COURSE_SIGMA_RAD } else { 1e3 };
+    let course_sigma = if moving { course_sigma } else { 1e3 };
     let sig = Vector3::new(GNSS_TILT_SIGMA_RAD, GNSS_TILT_SIGMA_RAD, course_sigma);
     att.update_euler(&Vector3::new(r, p, y), &sig, gate, att.t_ns, diag);
+}
+
+/// 1-σ of the course pseudo-measurement, rad: the velocity noise across the track over the
+/// horizontal speed, combined with `GNSS_COURSE_FLOOR_RAD`.
+fn course_sigma_rad(sigma_vel_mps: f64, v: &Vector3<f64>) -> f64 {
+    let vh = v.xy().norm().max(1e-3);
+    (sigma_vel_mps / vh).hypot(GNSS_COURSE_FLOOR_RAD)
 }
 
 /// The heading that puts the velocity in the body x–z plane (coordinated flight, no sideslip) at
