@@ -10,8 +10,9 @@
 //! Where the attitude comes from (our reading of sections V–VI):
 //! - Alignment (the "initial known value" of eq. 34): from the first fix, roll/pitch from the
 //!   accelerometers compensated by the GNSS acceleration and yaw from the GNSS course (no
-//!   sideslip), fused at every fix with σ of a few degrees until every attitude σ is below
-//!   `paper_video_start_sigma_rad` (a few seconds), then never again.
+//!   sideslip, from the GNSS velocity with the lever-arm velocity removed), fused at every fix
+//!   (tilt σ 2°, course σ from the velocity σ over the speed) until every attitude σ is below
+//!   `paper_video_start_sigma_rad` (about 2 s), then never again.
 //! - After that, GNSS reaches the attitude only through the lever arm of eqs. (32)–(33): the
 //!   GNSS update is linearized in the Euler angles too (`posvel::PosVelEkf::update_gnss`), so with a
 //!   big lever arm the attitude stays observable and with a small one it is nearly gyro
@@ -43,8 +44,14 @@ use posvel::PosVelEkf;
 const GYRO_MEAN_NS: i64 = 100_000_000;
 /// No GNSS for this long activates VIDEO-IMU(2), ns.
 const OUTAGE_AFTER_NS: i64 = 1_000_000_000;
-/// σ of the GNSS-derived tilt and course pseudo-measurements of the alignment, rad.
+/// σ of the GNSS-derived tilt pseudo-measurement of the alignment, rad: the GNSS acceleration
+/// differenced from two fixes (0.05 m/s over 0.2 s, 0.35 m/s²) over g.
 const GNSS_TILT_SIGMA_RAD: f64 = 0.035;
+/// Floor of the course pseudo-measurement's σ, rad: the no-sideslip heading's sensitivity to the
+/// roll/pitch error in banked flight and the velocity's timing (0.1°). The course σ itself is the
+/// cross-track velocity σ over the speed (0.05 m/s at 30 m/s: 0.1°); the earlier fixed 0.05 rad
+/// was 30× that, so the alignment barely reached the 0.5° start σ of the video and left roll and
+/// pitch σ at the threshold.
 const GNSS_COURSE_FLOOR_RAD: f64 = 0.002;
 /// σ of the held speed of eq. (35) at the start of an outage, m/s, and its growth, m/s per s.
 const SPEED_SIGMA_MPS: f64 = 0.3;
