@@ -13,6 +13,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
+use futures::FutureExt;
 use hdrhistogram::Histogram;
 use tokio::task::JoinHandle;
 
@@ -415,7 +416,7 @@ pub async fn run(
     tokio::pin!(senders_done);
     let mut send_results = None;
     let mut drain_deadline: Option<tokio::time::Instant> = None;
-    loop {
+    'run: loop {
         let deadline = drain_deadline
             .unwrap_or_else(|| tokio::time::Instant::now() + Duration::from_secs(3600));
         tokio::select! {
@@ -423,24 +424,35 @@ pub async fn run(
                 send_results = Some(r);
                 drain_deadline = Some(tokio::time::Instant::now() + if expects_poses { params.drain } else { Duration::ZERO });
             }
-            p = poses.next() => match p {
-                Some(Ok(p)) => {
-                    let now = Instant::now();
-                    live.poses.fetch_add(1, Ordering::Relaxed);
-                    match vehicle_index(&p.vehicle_id, &params).zip(rec.due_of_sample(p.t_ns)) {
-                        Some((k, due)) => {
-                            pose_count += 1;
-                            let scheduled = start + Duration::from_nanos((start_offset_ns(k, &params) + due).max(0) as u64);
-                            let lat = now.saturating_duration_since(scheduled).as_nanos() as u64;
-                            let _ = latency.record(lat.max(1));
-                            let s = &mut seen[k];
-                            s.last_pose_t_ns = Some(s.last_pose_t_ns.map_or(p.t_ns, |t| t.max(p.t_ns)));
+            p = poses.next() => {
+                // This pose, then every pose already received, without going back through the
+                // select (at fleet scale poses arrive at IMU rate for every vehicle).
+                let mut p = p;
+                loop {
+                    match p {
+                        Some(Ok(p)) => {
+                            let now = Instant::now();
+                            live.poses.fetch_add(1, Ordering::Relaxed);
+                            match vehicle_index(&p.vehicle_id, &params).zip(rec.due_of_sample(p.t_ns)) {
+                                Some((k, due)) => {
+                                    pose_count += 1;
+                                    let scheduled = start + Duration::from_nanos((start_offset_ns(k, &params) + due).max(0) as u64);
+                                    let lat = now.saturating_duration_since(scheduled).as_nanos() as u64;
+                                    let _ = latency.record(lat.max(1));
+                                    let s = &mut seen[k];
+                                    s.last_pose_t_ns = Some(s.last_pose_t_ns.map_or(p.t_ns, |t| t.max(p.t_ns)));
+                                }
+                                None => foreign += 1,
+                            }
                         }
-                        None => foreign += 1,
+                        Some(Err(e)) => return Err(e),
+                        None => break 'run,
+                    }
+                    match poses.next().now_or_never() {
+                        Some(next) => p = next,
+                        None => break,
                     }
                 }
-                Some(Err(e)) => return Err(e),
-                None => break,
             },
             h = health.next() => if let Some(Ok(h)) = h {
                 latest_health.insert(h.vehicle_id.clone(), h);

@@ -173,35 +173,71 @@ where
 {
     let (tx, out) = mpsc::channel(WATCH_QUEUE);
     tokio::spawn(async move {
-        let mut seen: HashMap<String, u64> = HashMap::new();
+        let mut filter = WatchFilter::new(sel);
         loop {
-            let item = tokio::select! {
+            let first = tokio::select! {
                 r = rx.recv() => r,
                 _ = stopping.wait_for(|s| *s) => break,
                 _ = tx.closed() => break,
             };
-            match item {
-                Ok(m) => {
-                    let id = id_of(&m);
-                    if !sel.matches(id) {
-                        continue;
+            // Then everything already in the ring, without going back through the select: at
+            // fleet scale this task sees every pose of every vehicle (IMU rate), so the per-item
+            // overhead is what bounds a watch's throughput.
+            let mut next = Some(first);
+            while let Some(item) = next.take() {
+                match item {
+                    Ok(m) => {
+                        if filter.keep(id_of(&m)) && tx.send(Ok((*m).clone())).await.is_err() {
+                            return;
+                        }
                     }
-                    let n = seen.entry(id.to_owned()).or_insert(0);
-                    *n += 1;
-                    if (*n - 1) % sel.decimation as u64 != 0 {
-                        continue;
-                    }
-                    if tx.send(Ok((*m).clone())).await.is_err() {
-                        break;
-                    }
+                    // A slow watcher skips what it missed rather than slowing estimation down.
+                    Err(broadcast::error::RecvError::Lagged(_)) => {}
+                    Err(broadcast::error::RecvError::Closed) => return,
                 }
-                // A slow watcher skips what it missed rather than slowing estimation down.
-                Err(broadcast::error::RecvError::Lagged(_)) => continue,
-                Err(broadcast::error::RecvError::Closed) => break,
+                next = match rx.try_recv() {
+                    Ok(m) => Some(Ok(m)),
+                    Err(broadcast::error::TryRecvError::Lagged(n)) => {
+                        Some(Err(broadcast::error::RecvError::Lagged(n)))
+                    }
+                    Err(_) => None,
+                };
             }
         }
     });
     Box::pin(ReceiverStream::new(out))
+}
+
+/// A watch's selector plus its per-vehicle decimation counters.
+struct WatchFilter {
+    sel: Selector,
+    seen: HashMap<String, u64>,
+}
+
+impl WatchFilter {
+    fn new(sel: Selector) -> Self {
+        Self {
+            sel,
+            seen: HashMap::new(),
+        }
+    }
+
+    /// Whether the message of vehicle `id` goes out (selected, and the first of every
+    /// `decimation` of that vehicle).
+    fn keep(&mut self, id: &str) -> bool {
+        if !self.sel.matches(id) {
+            return false;
+        }
+        if self.sel.decimation <= 1 {
+            return true;
+        }
+        let n = match self.seen.get_mut(id) {
+            Some(n) => n,
+            None => self.seen.entry(id.to_owned()).or_insert(0),
+        };
+        *n += 1;
+        (*n - 1).is_multiple_of(u64::from(self.sel.decimation))
+    }
 }
 
 fn unknown_vehicle(id: &str) -> Status {
