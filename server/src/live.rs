@@ -240,15 +240,21 @@ impl Scene {
             return;
         };
         let frame = *self.frame.get_or_insert_with(|| LocalFrame::new(lla));
-        let Ok(pose) = foxglove_conv::pose_in_frame(p, &frame) else {
-            return;
-        };
         let v = self.vehicle(&p.vehicle_id);
-        v.pose.log(&pose);
-        v.estimate_fix.log(&estimate_fix(p, &lla));
+        if v.estimate_fix.has_sinks() {
+            v.estimate_fix.log(&estimate_fix(p, &lla));
+        }
         let due = v
             .last_path_t_ns
             .is_none_or(|t| p.t_ns.saturating_sub(t) >= PATH_SPACING_NS);
+        // Poses come at IMU rate: convert one only when someone watches it or the path keeps it.
+        if !due && !v.pose.has_sinks() {
+            return;
+        }
+        let Ok(pose) = foxglove_conv::pose_in_frame(p, &frame) else {
+            return;
+        };
+        v.pose.log(&pose);
         if due && let Some(inner) = pose.pose {
             v.last_path_t_ns = Some(p.t_ns);
             if v.path_poses.len() == PATH_MAX_POSES {
