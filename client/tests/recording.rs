@@ -1,0 +1,100 @@
+//! `uavnav record` then `uavnav replay`: a recording reproduces the poses.
+
+mod common;
+
+use std::path::Path;
+use std::time::Duration;
+
+use common::*;
+use uavnav_client::{Client, Selector, pb};
+
+/// Poses recorded on `/uavnav/{vehicle}/pose` in an MCAP file: (t_ns, lat, lon, alt).
+fn recorded_poses(path: &Path, vehicle: &str) -> Vec<(i64, f64, f64, f64)> {
+    use prost::Message;
+    let bytes = std::fs::read(path).unwrap();
+    let topic = format!("/uavnav/{vehicle}/pose");
+    let mut out = Vec::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        if m.channel.topic == topic {
+            let p = pb::PoseEstimate::decode(m.data.as_ref()).unwrap();
+            let g = p.position.unwrap();
+            out.push((p.t_ns, g.latitude_deg, g.longitude_deg, g.altitude_m));
+        }
+    }
+    out.sort_by_key(|p| p.0);
+    out
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn record_then_replay_reproduces_the_poses() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = simulate(dir.path(), "flight.mcap", 4.0);
+    let rec = dir.path().join("fleet.mcap");
+
+    // Service A: record everything on its Zenoh bus while a flight is replayed into it over Zenoh.
+    let a = start().await;
+    let recorder = tokio::spawn(run_async(vec![
+        "record".into(),
+        "--from".into(),
+        a.zenoh.clone(),
+        "--out".into(),
+        rec.display().to_string(),
+        "--idle-exit".into(),
+        "2".into(),
+        "--duration".into(),
+        "30".into(),
+    ]));
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    let out = run_async(vec![
+        "replay".into(),
+        ds.display().to_string(),
+        "--to".into(),
+        a.zenoh.clone(),
+        "--speed".into(),
+        "4".into(),
+        "--vehicles".into(),
+        "2".into(),
+        "--id-prefix".into(),
+        "rec-".into(),
+    ])
+    .await;
+    assert_eq!(out.status.code(), Some(0));
+    let out = recorder.await.unwrap();
+    assert_eq!(out.status.code(), Some(0));
+    a.server.shutdown().await.unwrap();
+    let poses_a = recorded_poses(&rec, "rec-1");
+    assert!(poses_a.len() > 300, "{} poses recorded", poses_a.len());
+
+    // Service B: replay the recording over gRPC, watch the poses.
+    let b = start().await;
+    let client = Client::connect_url(&b.grpc).await.unwrap();
+    let mut w = client.watch_poses(Selector::ids(["rec-1"])).await.unwrap();
+    let out = run_async(vec![
+        "replay".into(),
+        rec.display().to_string(),
+        "--to".into(),
+        b.grpc.clone(),
+        "--max".into(),
+    ])
+    .await;
+    assert_eq!(out.status.code(), Some(0));
+    let got = collect(&mut w, poses_a.len(), Duration::from_secs(20)).await;
+    let mut poses_b: Vec<(i64, f64, f64, f64)> = got
+        .iter()
+        .map(|p| {
+            let g = p.position.clone().unwrap();
+            (p.t_ns, g.latitude_deg, g.longitude_deg, g.altitude_m)
+        })
+        .collect();
+    poses_b.sort_by_key(|p| p.0);
+    assert_eq!(poses_b.len(), poses_a.len());
+    for (x, y) in poses_a.iter().zip(&poses_b) {
+        assert_eq!(x.0, y.0);
+        assert!(
+            (x.1 - y.1).abs() < 1e-12 && (x.2 - y.2).abs() < 1e-12 && (x.3 - y.3).abs() < 1e-6,
+            "{x:?} vs {y:?}"
+        );
+    }
+    b.server.shutdown().await.unwrap();
+}
