@@ -145,6 +145,22 @@ impl AttitudeEkf {
             .map(|e| Rotation3::from_euler_angles(e.x, e.y, e.z).into_inner())
     }
 
+    /// Applies the Euler-angle correction `de` of a measurement taken at `t_ns` to the current
+    /// attitude AND to the history from `t_ns` on (from the entry `euler_at(t_ns)` returns). The
+    /// measurement is late (the video arrives ~50 ms after its frame): the history after `t_ns` was
+    /// propagated from the uncorrected attitude, and the next late measurement (the direction of
+    /// eq. D1 at the same frame time, the next frame's chain restart at `t0`, VIDEO-IMU(2)'s
+    /// rotation) is compared against it; left stale, its innovation would contain again the error
+    /// this correction already removed. `de` is added as is: over the history's 2 s the Euler
+    /// angles change little, so the correction's Euler image hardly does.
+    fn correct(&mut self, de: &Vector3<f64>, t_ns: i64) {
+        self.euler = wrap3(self.euler + de);
+        let from = self.hist.partition_point(|h| h.0 <= t_ns).saturating_sub(1);
+        for h in self.hist.iter_mut().skip(from) {
+            h.1 = wrap3(h.1 + de);
+        }
+    }
+
     /// Gated EKF update of a 3-D measurement with innovation `y`, Jacobian `h` w.r.t. `[δe; η]`
     /// and noise `r`. Returns whether it was fused.
     fn update(
@@ -172,7 +188,7 @@ impl AttitudeEkf {
         }
         let k = pht * s_inv;
         let dx = k * y;
-        self.euler = wrap3(self.euler + dx.fixed_rows::<3>(0));
+        self.correct(&dx.fixed_rows::<3>(0).into_owned(), t_ns);
         self.chain += dx.fixed_rows::<3>(3);
         self.p -= k * pht.transpose();
         self.p = (self.p + self.p.transpose()) * 0.5;
@@ -204,11 +220,17 @@ impl AttitudeEkf {
     /// correction `K_e y` with `K_e = P[:, e] H_eᵀ S⁻¹` for an innovation `y` whose covariance `s_inv`
     /// (inverse) the caller formed. Cross-covariances with the position/velocity filter are not
     /// kept (the paper's filters are separate).
-    pub fn apply_joint(&mut self, h_e: &Matrix3<f64>, s_inv: &Matrix3<f64>, y: &Vector3<f64>) {
+    pub fn apply_joint(
+        &mut self,
+        h_e: &Matrix3<f64>,
+        s_inv: &Matrix3<f64>,
+        y: &Vector3<f64>,
+        t_ns: i64,
+    ) {
         let pht: SMatrix<f64, 6, 3> = self.p.fixed_columns::<3>(0) * h_e.transpose();
         let k = pht * s_inv;
         let dx = k * y;
-        self.euler = wrap3(self.euler + dx.fixed_rows::<3>(0));
+        self.correct(&dx.fixed_rows::<3>(0).into_owned(), t_ns);
         self.chain += dx.fixed_rows::<3>(3);
         self.p -= k * pht.transpose();
         self.p = (self.p + self.p.transpose()) * 0.5;
@@ -341,4 +363,33 @@ pub fn lever_jacobian(euler: &Vector3<f64>, u: &Vector3<f64>) -> Matrix3<f64> {
     let d_pitch = rz * ry * Vector3::y().cross(&(rx * u));
     let d_yaw = Vector3::z().cross(&(c * u));
     Matrix3::from_columns(&[d_roll, d_pitch, d_yaw])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A late measurement's correction reaches the history from its time on, so that the next
+    /// measurement at (or after) that time is compared against the corrected attitude.
+    #[test]
+    fn a_late_correction_reaches_the_history_from_the_measurement_time_on() {
+        let sigma = Vector3::repeat(0.01);
+        let mut att = AttitudeEkf::new(Vector3::new(0.1, 0.05, 1.0), sigma, 0);
+        let dt_ns = 5_000_000;
+        for k in 1..=20 {
+            att.predict(&Vector3::zeros(), &Vector3::zeros(), 5e-3, 1e-9, k * dt_ns);
+        }
+        let before = att.euler_at(5 * dt_ns - 1);
+        let z = att.euler + Vector3::new(0.0, 0.0, 0.01);
+        let mut diag = InnovDiag::new();
+        att.update_euler(&z, &Vector3::repeat(0.001), 3.29, 10 * dt_ns, &mut diag);
+        assert_eq!(diag.fused, 1);
+        // No gyro rate: every entry from the measurement time on equals the corrected attitude,
+        // the entries before it are untouched.
+        for t in [10 * dt_ns, 15 * dt_ns, 20 * dt_ns] {
+            assert_eq!(att.euler_at(t), Some(att.euler), "at {t} ns");
+        }
+        assert_eq!(att.euler_at(5 * dt_ns - 1), before);
+        assert!(att.euler.z > 1.0 + 0.009);
+    }
 }

@@ -150,7 +150,7 @@ impl PosVelEkf {
         }
         let r = rv + h_e * att.p_euler() * h_e.transpose();
         if let Some(s_inv) = self.update_block(3, &y, &r, gate, m.t_ns, stuck, diag_vel) {
-            att.apply_joint(&h_e, &s_inv, &y);
+            att.apply_joint(&h_e, &s_inv, &y, m.t_ns);
         }
     }
 
