@@ -74,6 +74,23 @@ pub struct EstimatorParams {
     /// Paper profile: the video pseudo-attitude (eq. 34) starts from the filter's attitude only
     /// once every attitude σ is below this, rad (the "initial known value").
     pub paper_video_start_sigma_rad: f64,
+    /// Paper profile: inflation of each video delta-attitude's covariance as it enters the
+    /// eq. (34) pseudo-attitude chain (the growth of the chain-error state `η`). The chain SUMS the
+    /// deltas, so what matters is the long-run variance of their errors, not the per-frame one:
+    /// consecutive frames share ground texture and tracks, and the mean of the front end's errors
+    /// over 50 (200) frames varies 1.7–3.4× (3.6–9.7×) more than for white errors (see
+    /// `estimator/README.md`, "Vision calibration"). 6 is the allowance the `eskf` profile uses for
+    /// the same front end (`vision_cov_scale`). Use 1 for an egomotion source with white errors.
+    pub paper_chain_cov_scale: f64,
+    /// Paper profile, OUR ADDITION (not in the paper): fuse the video's direction of travel in
+    /// VIDEO-IMU(1) while GNSS is available (eq. D1 of `paper::attitude`): the essential matrix's
+    /// translation direction rotated into NED with the attitude, against the direction of the
+    /// GNSS-IMU velocity (course and flight-path angle). It makes the heading observable with a
+    /// small lever arm (the paper's attitude sees GNSS only through the lever arm, eqs. 32–33).
+    /// Fused only while a GNSS velocity was fused in the last 0.5 s; during outages the direction
+    /// goes to VIDEO-IMU(2) (eq. 35) instead. The direction's covariance is inflated by
+    /// `vision_cov_scale`. `false` gives the paper's filter as written.
+    pub paper_video_direction: bool,
     /// Position σ above which the filter is declared diverged, m.
     pub diverged_pos_sigma_m: f64,
 }
@@ -105,6 +122,8 @@ impl Default for EstimatorParams {
             vision_joint_update: true,
             paper_gyro_instability_psd: 7e-7,
             paper_video_start_sigma_rad: 0.5f64.to_radians(),
+            paper_chain_cov_scale: 6.0,
+            paper_video_direction: true,
             diverged_pos_sigma_m: 5_000.0,
         }
     }

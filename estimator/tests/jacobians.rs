@@ -495,3 +495,56 @@ fn paper_chain_error_is_fixed_in_the_navigation_frame() {
     let de0 = euler(&(Rotation3::new(eta0) * c0)) - euler(&c0);
     assert!((de - de0).norm() > 1e-3, "{de} vs {de0}");
 }
+
+/// Eq. (D1) of `paper::attitude`: the course and flight-path angle of the video direction of
+/// travel rotated into NED, `h(e) = [χ(C(e) u); γ(C(e) u)]`, and its Jacobian w.r.t. the Euler
+/// angles `A(C u) ∂(C u)/∂e`, against central differences; and `A(x)` itself (the angles of the
+/// GNSS-IMU velocity), in a climbing turn and in a descent heading south-west (course near ±π).
+#[test]
+fn paper_direction_of_travel_jacobian_matches_finite_differences() {
+    use nalgebra::Vector2;
+    use uavnav_estimator::paper::attitude::{course_path_angle, direction_model};
+    let wrap = |a: f64| {
+        (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
+    };
+    let cases = [
+        (Vector3::new(0.4, -0.3, 2.5), Vector3::new(0.97, 0.05, 0.2)),
+        (Vector3::new(-0.2, 0.1, -2.9), Vector3::new(0.9, -0.3, -0.1)),
+        (Vector3::new(0.05, 0.02, 0.0), Vector3::new(1.0, 0.0, 0.0)),
+    ];
+    for (e, u) in cases {
+        let u = u.normalize();
+        let (_, h) = direction_model(&e, &u);
+        let d = 1e-6;
+        for k in 0..3 {
+            let (mut ep, mut em) = (e, e);
+            ep[k] += d;
+            em[k] -= d;
+            let (zp, zm) = (direction_model(&ep, &u).0, direction_model(&em, &u).0);
+            let num = Vector2::new(wrap(zp.x - zm.x), zp.y - zm.y) / (2.0 * d);
+            let err = (num - h.column(k)).norm();
+            assert!(
+                err < 1e-7,
+                "e {e:?} column {k}: {num:?} vs {:?}",
+                h.column(k)
+            );
+        }
+        // A(x) for an un-normalised velocity (the angles do not depend on its length).
+        let w = 25.0 * u + Vector3::new(0.3, -0.2, 0.1);
+        let (_, a) = course_path_angle(&w);
+        for k in 0..3 {
+            let mut dw = Vector3::zeros();
+            dw[k] = 1e-6;
+            let (zp, zm) = (
+                course_path_angle(&(w + dw)).0,
+                course_path_angle(&(w - dw)).0,
+            );
+            let num = Vector2::new(wrap(zp.x - zm.x), zp.y - zm.y) / 2e-6;
+            assert!(
+                (num - a.column(k)).norm() < 1e-7,
+                "w {w:?} column {k}: {num:?} vs {:?}",
+                a.column(k)
+            );
+        }
+    }
+}

@@ -29,7 +29,7 @@
 
 use std::collections::VecDeque;
 
-use nalgebra::{Isometry3, Matrix3, Rotation3, SMatrix, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Rotation3, SMatrix, SVector, UnitQuaternion, Vector2, Vector3};
 use uavnav_core::Egomotion;
 use uavnav_core::rotation::wrap_pi;
 
@@ -161,13 +161,13 @@ impl AttitudeEkf {
         }
     }
 
-    /// Gated EKF update of a 3-D measurement with innovation `y`, Jacobian `h` w.r.t. `[δe; η]`
-    /// and noise `r`. Returns whether it was fused.
-    fn update(
+    /// Gated EKF update of a `D`-dimensional measurement (D ≤ 3) with innovation `y`, Jacobian `h`
+    /// w.r.t. `[δe; η]` and noise `r`, taken at `t_ns`. Returns whether it was fused.
+    fn update<const D: usize>(
         &mut self,
-        y: &Vector3<f64>,
-        h: &SMatrix<f64, 3, 6>,
-        r: &Matrix3<f64>,
+        y: &SVector<f64, D>,
+        h: &SMatrix<f64, D, 6>,
+        r: &SMatrix<f64, D, D>,
         gate: f64,
         t_ns: i64,
         diag: &mut InnovDiag,
@@ -178,9 +178,13 @@ impl AttitudeEkf {
             return false;
         };
         let nis = (y.transpose() * s_inv * y)[(0, 0)];
-        diag.innov = [y.x, y.y, y.z];
-        diag.innov_var = [s[(0, 0)], s[(1, 1)], s[(2, 2)]];
-        diag.test_ratio = nis / chi2_gate(3, gate);
+        diag.innov = [0.0; 3];
+        diag.innov_var = [0.0; 3];
+        for k in 0..D.min(3) {
+            diag.innov[k] = y[k];
+            diag.innov_var[k] = s[(k, k)];
+        }
+        diag.test_ratio = nis / chi2_gate(D, gate);
         if diag.test_ratio > 1.0 {
             diag.rejected += 1;
             diag.consecutive_rejects += 1;
@@ -327,6 +331,107 @@ impl AttitudeEkf {
             self.pseudo = None;
         }
     }
+}
+
+/// Inputs of the eq. (D1) direction-of-travel measurement (see [`AttitudeEkf::direction_update`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DirectionMeas {
+    /// Frame times of the video pair, ns.
+    pub t0_ns: i64,
+    /// Frame time of the second frame, ns: the attitude the direction is rotated with.
+    pub t1_ns: i64,
+    /// The video's direction of travel of the camera in body-1 axes (unit), `−R_bc t̂`.
+    pub dir_body: Vector3<f64>,
+    /// Its covariance in body axes (tangent to the unit sphere), already inflated for the time
+    /// correlation of the vision errors.
+    pub dir_cov_body: Matrix3<f64>,
+    /// The GNSS-IMU filter's mean velocity of the camera over `[t0, t1]`, NED, m/s.
+    pub vel_ned_mps: Vector3<f64>,
+    /// Its covariance, (m/s)².
+    pub vel_cov: Matrix3<f64>,
+}
+
+/// Smallest ratio of horizontal to total length of a direction for eq. (D1): the course is
+/// undefined when the motion is vertical.
+const D1_MIN_HORIZONTAL_RATIO: f64 = 0.3;
+
+impl AttitudeEkf {
+    /// Eq. (D1), our addition to VIDEO-IMU(1) (not in the paper): the video's direction of travel
+    /// rotated into NED with the attitude, against the direction of the GNSS-IMU velocity.
+    ///
+    /// The essential matrix of a frame pair gives the translation direction `t̂` in camera-1 axes
+    /// (`x₁ = R x₀ + t`), so the camera moved along `c₁ − c₀ ∝ −C(e₁) R_bc t̂`: in body-1 axes
+    /// `u = −R_bc t̂`, in NED `d(e) = C(e₁) u`, with `e₁` the Euler angles at frame 1. The GNSS-IMU
+    /// filter knows the same direction in NED without the attitude: its mean velocity of the camera
+    /// over the pair, `w`. Both point the same way; the length carries no attitude information, so
+    /// two angles are compared, the course `χ(x) = atan2(x_E, x_N)` and the flight-path angle
+    /// `γ(x) = atan2(−x_D, |x_NE|)`:
+    ///
+    /// `z = [χ(w); γ(w)]`, `h(e) = [χ(C(e) u); γ(C(e) u)]`                              (D1)
+    ///
+    /// With `h_x = |x_NE|` and `n = |x|`: `∂χ/∂x = [−x_E, x_N, 0] / h_x²`,
+    /// `∂γ/∂x = [x_N x_D, x_E x_D, −h_x²] / (h_x n²)` (`A(x)`, [`course_path_angle`]), so
+    /// `H_e = A(d) ∂(C u)/∂e` with `∂(C u)/∂e` the lever-arm Jacobian ([`lever_jacobian`]), and
+    /// `H_η = 0`. Noise `R = A(w) P_w A(w)ᵀ + A(d) C Σ_u Cᵀ A(d)ᵀ` (GNSS-IMU velocity and video
+    /// direction, independent). In straight level flight `χ(w) − χ(d)` is the heading error: the
+    /// video measures the direction of travel in the body (sideslip and angle of attack) and the
+    /// GNSS the course, which together make the heading observable with any lever arm (the paper's
+    /// filter sees the heading only through the lever arm, weakly for 2 m); `γ` does the same for
+    /// the pitch. The roll about the direction of travel stays unobserved by it. Returns whether
+    /// it was fused.
+    pub fn direction_update(&mut self, m: &DirectionMeas, gate: f64, diag: &mut InnovDiag) -> bool {
+        let Some(e1) = self.euler_at(m.t1_ns) else {
+            return false;
+        };
+        let c1 = Rotation3::from_euler_angles(e1.x, e1.y, e1.z).into_inner();
+        let d = c1 * m.dir_body;
+        let w = m.vel_ned_mps;
+        let steep = |x: &Vector3<f64>| x.xy().norm() < D1_MIN_HORIZONTAL_RATIO * x.norm();
+        if steep(&d) || steep(&w) || w.norm() <= 0.0 {
+            return false;
+        }
+        let (z, a_w) = course_path_angle(&w);
+        let (_, a_d) = course_path_angle(&d);
+        let (z_pred, h_e) = direction_model(&e1, &m.dir_body);
+        let y = Vector2::new(wrap_pi(z.x - z_pred.x), z.y - z_pred.y);
+        let mut h = SMatrix::<f64, 2, 6>::zeros();
+        h.fixed_view_mut::<2, 3>(0, 0).copy_from(&h_e);
+        let r = a_w * m.vel_cov * a_w.transpose()
+            + a_d * c1 * m.dir_cov_body * c1.transpose() * a_d.transpose();
+        self.update(&y, &h, &r, gate, m.t1_ns, diag)
+    }
+}
+
+/// Eq. (D1)'s prediction `h(e) = [χ(C(e) u); γ(C(e) u)]` for the body direction `u` and its
+/// Jacobian w.r.t. the Euler angles, `A(C u) ∂(C u)/∂e`.
+pub fn direction_model(
+    euler: &Vector3<f64>,
+    u: &Vector3<f64>,
+) -> (Vector2<f64>, SMatrix<f64, 2, 3>) {
+    let d = Rotation3::from_euler_angles(euler.x, euler.y, euler.z) * u;
+    let (ang, a) = course_path_angle(&d);
+    (ang, a * lever_jacobian(euler, u))
+}
+
+/// Course and flight-path angle of a NED vector `x` and their Jacobian w.r.t. `x` (eq. D1):
+/// `χ = atan2(x_E, x_N)`, `γ = atan2(−x_D, |x_NE|)`;
+/// `∂χ/∂x = [−x_E, x_N, 0] / h²`, `∂γ/∂x = [x_N x_D, x_E x_D, −h²] / (h n²)`, `h = |x_NE|`,
+/// `n = |x|`. Scale-free: the Jacobian of the angles of a velocity is that of its direction over
+/// its length.
+pub fn course_path_angle(x: &Vector3<f64>) -> (Vector2<f64>, SMatrix<f64, 2, 3>) {
+    let h2 = x.x * x.x + x.y * x.y;
+    let h = h2.sqrt();
+    let n2 = h2 + x.z * x.z;
+    let ang = Vector2::new(x.y.atan2(x.x), (-x.z).atan2(h));
+    let a = SMatrix::<f64, 2, 3>::new(
+        -x.y / h2,
+        x.x / h2,
+        0.0,
+        x.x * x.z / (h * n2),
+        x.y * x.z / (h * n2),
+        -h / n2,
+    );
+    (ang, a)
 }
 
 /// Eq. (F1): `∂(J(φ,θ) ω)/∂(φ,θ,ψ)` of eq. (31). With `a = cφ ω_y − sφ ω_z` and

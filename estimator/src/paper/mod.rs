@@ -37,7 +37,7 @@ use crate::output::{AidingFlags, PoseOutput};
 use crate::output_predictor::mean_of;
 use crate::params::EstimatorParams;
 use crate::prediction::{GravityCache, earth_rate_ned};
-use attitude::AttitudeEkf;
+use attitude::{AttitudeEkf, DirectionMeas};
 use posvel::PosVelEkf;
 
 /// Window of the mean body rate used in the lever-arm velocity of eq. (33), ns.
@@ -56,6 +56,12 @@ const GNSS_COURSE_FLOOR_RAD: f64 = 0.002;
 /// σ of the held speed of eq. (35) at the start of an outage, m/s, and its growth, m/s per s.
 const SPEED_SIGMA_MPS: f64 = 0.3;
 const SPEED_SIGMA_GROWTH_MPS_PER_S: f64 = 0.02;
+/// The eq. (D1) direction measurement needs a GNSS velocity fused within this, ns: its reference
+/// direction is the GNSS-IMU velocity, which coasts on the inertial sensors without GNSS.
+const D1_GNSS_VEL_RECENT_NS: i64 = 500_000_000;
+/// History of the GNSS-IMU velocity kept for eq. (D1) (the video arrives ~50 ms after frame 1 and
+/// covers the 0.1 s before), ns.
+const VEL_HISTORY_NS: i64 = 1_000_000_000;
 
 /// The paper's three filters.
 #[derive(Debug, Clone)]
@@ -74,6 +80,8 @@ pub struct PaperFilter {
     gps_imu: Option<PosVelEkf>,
     vio2: Option<PosVelEkf>,
     last_speed_mps: f64,
+    /// GNSS-IMU velocity after each IMU sample (NED, m/s), for the mean velocity of eq. (D1).
+    vel_hist: VecDeque<(i64, Vector3<f64>)>,
     last_fix: Option<(GnssMeas, Vector3<f64>)>,
     f_sum: (Vector3<f64>, u32),
     init_f: VecDeque<Vector3<f64>>,
@@ -105,6 +113,7 @@ impl PaperFilter {
             gps_imu: None,
             vio2: None,
             last_speed_mps: 0.0,
+            vel_hist: VecDeque::new(),
             last_fix: None,
             f_sum: (Vector3::zeros(), 0),
             init_f: VecDeque::new(),
@@ -134,6 +143,7 @@ impl PaperFilter {
         fresh.gps_imu = None;
         fresh.vio2 = None;
         fresh.last_speed_mps = 0.0;
+        fresh.vel_hist.clear();
         fresh.last_fix = None;
         fresh.f_sum = (Vector3::zeros(), 0);
         fresh.init_f.clear();
@@ -188,6 +198,14 @@ impl PaperFilter {
             .at(&frame, &gi.x);
         let q_acc = self.accel_psd + m.accel.norm_squared() * att_var;
         gi.predict(&c, &m.accel, &g, &self.w_ie, dt_s, q_acc);
+        self.vel_hist.push_back((s.t_ns, gi.v));
+        while self
+            .vel_hist
+            .front()
+            .is_some_and(|h| s.t_ns - h.0 > VEL_HISTORY_NS)
+        {
+            self.vel_hist.pop_front();
+        }
         let outage = self
             .last_fix
             .is_some_and(|(f, _)| s.t_ns - f.t_ns > OUTAGE_AFTER_NS);
@@ -357,9 +375,20 @@ impl PaperFilter {
             &bfc,
             gate,
             start_sigma,
-            self.params.vision_cov_scale,
+            self.params.paper_chain_cov_scale,
             &mut self.health.vision_rot,
         );
+        let now_ns = self.imu.back().map_or(m.t1_ns, |s| s.t_ns);
+        if self.params.paper_video_direction
+            && self.aligned
+            && self.vio2.is_none()
+            && self.health.gnss_vel.active(now_ns, D1_GNSS_VEL_RECENT_NS)
+            && let Some(d1) = self.direction_meas(m, &bfc)
+        {
+            let Some(att) = self.att.as_mut() else { return };
+            att.direction_update(&d1, gate, &mut self.health.vision_trans);
+        }
+        let Some(att) = self.att.as_ref() else { return };
         let Some(v2) = self.vio2.as_mut() else { return };
         let Some(dir) = m
             .t_dir_cam1
@@ -392,6 +421,63 @@ impl PaperFilter {
             gate,
             &mut self.health.vision_trans,
         );
+    }
+
+    /// The inputs of eq. (D1) for egomotion `m` (see `attitude::AttitudeEkf::direction_update`):
+    /// the video direction of travel in body-1 axes with its covariance (`vision_cov_scale`
+    /// applied, as for every use of the video translation), and the GNSS-IMU filter's mean camera
+    /// velocity over the frame pair: `(∫v dt + (C₁ − C₀) r_c) / Δt` (trapezoids over the velocity
+    /// history; `r_c` the camera's offset from the IMU), with the filter's current velocity
+    /// covariance (its error hardly changes over 0.1 s). `None` when the pair is not covered by the
+    /// history or has no direction.
+    fn direction_meas(&self, m: &Egomotion, bfc: &Isometry3<f64>) -> Option<DirectionMeas> {
+        let att = self.att.as_ref()?;
+        let gi = self.gps_imu.as_ref()?;
+        let r_bc = bfc.rotation.to_rotation_matrix().into_inner();
+        let (t_cam, cov_cam) = match (m.t_dir_cam1, m.t_cam1_m) {
+            (Some(u), _) => (u.into_inner(), m.t_cov),
+            (None, Some(t)) => {
+                // Metric translation: the direction's covariance is that of t across itself,
+                // over |t|².
+                let n = t.norm();
+                if n <= 1e-6 {
+                    return None;
+                }
+                let u = t / n;
+                let perp = Matrix3::identity() - u * u.transpose();
+                (u, perp * m.t_cov * perp / (n * n))
+            }
+            (None, None) => return None,
+        };
+        let dir_body = -(r_bc * t_cam);
+        let dir_cov_body = r_bc * cov_cam * r_bc.transpose() * self.params.vision_cov_scale;
+        let dt_s = (m.t1_ns - m.t0_ns) as f64 * 1e-9;
+        let (first, last) = (self.vel_hist.front()?, self.vel_hist.back()?);
+        if dt_s <= 0.0 || first.0 > m.t0_ns || last.0 < m.t1_ns {
+            return None;
+        }
+        let mut disp = Vector3::zeros();
+        for (a, b) in self.vel_hist.iter().zip(self.vel_hist.iter().skip(1)) {
+            let (lo, hi) = (a.0.max(m.t0_ns), b.0.min(m.t1_ns));
+            if hi <= lo {
+                continue;
+            }
+            // Linear interpolation of v between the samples, integrated over [lo, hi].
+            let span = (b.0 - a.0) as f64;
+            let at = |t: i64| a.1 + (b.1 - a.1) * ((t - a.0) as f64 / span);
+            disp += (at(lo) + at(hi)) * (0.5 * (hi - lo) as f64 * 1e-9);
+        }
+        let r_c = bfc.translation.vector;
+        let (c0, c1) = (att.rotation_at(m.t0_ns)?, att.rotation_at(m.t1_ns)?);
+        disp += (c1 - c0) * r_c;
+        Some(DirectionMeas {
+            t0_ns: m.t0_ns,
+            t1_ns: m.t1_ns,
+            dir_body,
+            dir_cov_body,
+            vel_ned_mps: disp / dt_s,
+            vel_cov: gi.p.fixed_view::<3, 3>(3, 3).into_owned(),
+        })
     }
 
     /// Motion prior from the gyro samples and the attitude filter.

@@ -121,6 +121,7 @@ impl RunCfg {
             // the oracle's errors are white: no allowance for time-correlated errors
             params: EstimatorParams {
                 vision_cov_scale: 1.0,
+                paper_chain_cov_scale: 1.0,
                 ..EstimatorParams::default()
             },
         }
