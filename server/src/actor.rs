@@ -19,7 +19,7 @@ use uavnav_proto::v1 as pb;
 use crate::config::VehiclesConfig;
 use crate::engine::{Engine, EngineStep, SharedFactory, VisionResult};
 use crate::health::HealthWindow;
-use crate::hub::Hub;
+use crate::hub::{Hub, PoseBatch};
 use crate::metrics::Metrics;
 use crate::reorder::{Refused, ReorderBuffer};
 use crate::vehicle::{InputKind, VehicleShared, VehicleStats};
@@ -29,6 +29,8 @@ use crate::vision_pool::VisionPool;
 const REORDER_CAPACITY: usize = 4096;
 /// IMU ingest times remembered to attribute latency to poses released late.
 const LATENCY_MEMORY: usize = 2048;
+/// Added to a re-armed flush deadline so that a timer firing a hair early does not spin.
+const FLUSH_SLACK: Duration = Duration::from_micros(100);
 
 /// Everything an actor needs from the service.
 #[derive(Debug)]
@@ -198,6 +200,7 @@ pub fn spawn(
         shared: Arc::clone(&shared),
         engine,
         pending: None,
+        outbox: Vec::new(),
         ingest_times: VecDeque::new(),
         last_input: Instant::now(),
         ctx,
@@ -219,6 +222,8 @@ struct Actor {
     buffer: ReorderBuffer<Stamped>,
     /// The outstanding vision job's result.
     pending: Option<oneshot::Receiver<VisionResult>>,
+    /// Poses made since the last publication (published once per handled event, as one batch).
+    outbox: Vec<pb::PoseEstimate>,
     /// (t_ns, arrival) of fused IMU samples, oldest first.
     ingest_times: VecDeque<(i64, Instant, i64)>,
     last_input: Instant,
@@ -243,9 +248,13 @@ impl Actor {
         // An idle stream's last window is flushed after this much wall time without input.
         let flush_after =
             Duration::from_secs_f64((self.ctx.vehicles.reorder_window_ms * 1e-3).max(0.005));
+        // One timer for the whole life of the actor, re-armed lazily: when it fires early (input
+        // came since it was set) it is pushed to the new deadline instead of flushing. A fresh
+        // timer per message would register and cancel a timer-wheel entry (a lock shared by the
+        // whole runtime) for every input.
+        let flush = tokio::time::sleep(flush_after);
+        tokio::pin!(flush);
         let evicted = loop {
-            let flush_at = (!self.buffer.is_empty())
-                .then(|| tokio::time::Instant::from_std(self.last_input + flush_after));
             tokio::select! {
                 biased;
                 done = recv_vision(&mut self.pending), if self.pending.is_some() => self.on_vision(done),
@@ -261,8 +270,15 @@ impl Actor {
                         break true;
                     }
                 }
-                _ = sleep_until_opt(flush_at), if flush_at.is_some() => self.flush_all(),
+                () = &mut flush, if !self.buffer.is_empty() => {
+                    let due = self.last_input + flush_after;
+                    if Instant::now() >= due {
+                        self.flush_all();
+                    }
+                    flush.as_mut().reset(tokio::time::Instant::from_std(due.max(Instant::now()) + FLUSH_SLACK));
+                }
             }
+            self.publish();
         };
         self.drain(&mut rx).await;
         evicted
@@ -287,6 +303,7 @@ impl Actor {
                 None => break,
             }
         }
+        self.publish();
         self.publish_health();
     }
 
@@ -382,9 +399,9 @@ impl Actor {
         }
     }
 
-    /// Publishes a step's poses and sends its vision job to the pool.
+    /// Queues a step's poses for publication and sends its vision job to the pool.
     fn apply(&mut self, step: EngineStep) {
-        self.publish(step.poses);
+        self.stamp(step.poses);
         let Some(work) = step.work else { return };
         if self.pending.is_some() {
             // The engine contract is one job at a time; never block on a broken engine.
@@ -426,25 +443,39 @@ impl Actor {
         }
     }
 
-    fn publish(&mut self, poses: Vec<pb::PoseEstimate>) {
+    /// Stamps poses with the arrival time of the IMU sample each was made from, records their
+    /// latency and queues them in the outbox.
+    fn stamp(&mut self, poses: Vec<pb::PoseEstimate>) {
+        if poses.is_empty() {
+            return;
+        }
+        let now = Instant::now();
         for mut pose in poses {
-            let arrival = self.arrival_of(pose.t_ns);
-            pose.vehicle_id = self.shared.id.to_string();
-            if let Some((_, wall_ns)) = arrival {
+            if let Some((at, wall_ns)) = self.arrival_of(pose.t_ns) {
                 pose.ingest_wall_ns = wall_ns;
-            }
-            let pose = Arc::new(pose);
-            self.shared
-                .latest_pose
-                .send_replace(Some(Arc::clone(&pose)));
-            let _ = self.ctx.hub.poses.send(pose);
-            self.ctx.metrics.poses.inc();
-            if let Some((at, _)) = arrival {
-                let latency_s = at.elapsed().as_secs_f64();
+                let latency_s = now.saturating_duration_since(at).as_secs_f64();
                 self.ctx.metrics.latency.observe(latency_s);
                 self.window.latency(latency_s);
             }
+            self.outbox.push(pose);
         }
+    }
+
+    /// Publishes the outbox as one batch: the vehicle's latest pose and the fan-out.
+    fn publish(&mut self) {
+        if self.outbox.is_empty() {
+            return;
+        }
+        let n = self.outbox.len();
+        let batch = Arc::new(PoseBatch {
+            vehicle_id: Arc::clone(&self.shared.id),
+            poses: std::mem::replace(&mut self.outbox, Vec::with_capacity(n)),
+        });
+        self.shared
+            .latest_pose
+            .send_replace(Some(Arc::clone(&batch)));
+        let _ = self.ctx.hub.poses.send(batch);
+        self.ctx.metrics.poses.inc_by(n as u64);
     }
 
     /// The arrival of the IMU sample a pose at `t_ns` was made from (the newest one not after it).
@@ -472,12 +503,5 @@ impl Actor {
             .send_replace(Some(Arc::clone(&report)));
         let _ = self.ctx.hub.health.send(report);
         self.ctx.metrics.health_reports.inc();
-    }
-}
-
-async fn sleep_until_opt(at: Option<tokio::time::Instant>) {
-    match at {
-        Some(at) => tokio::time::sleep_until(at).await,
-        None => std::future::pending().await,
     }
 }

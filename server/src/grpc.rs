@@ -17,6 +17,7 @@ use tonic::{Request, Response, Status, Streaming};
 use uavnav_proto::v1 as pb;
 use uavnav_proto::v1::uav_nav_server::UavNav;
 
+use crate::hub::PoseBatch;
 use crate::ingest::{Ingestor, Payload};
 use crate::metrics::{Kind, Outcome, Transport};
 use crate::validate;
@@ -159,18 +160,51 @@ impl Selector {
     }
 }
 
+/// What a watch stream carries: one vehicle's messages, `len()` of them per broadcast item.
+trait Watched: Send + Sync + 'static {
+    /// The message sent to the client.
+    type Out: Send + 'static;
+    /// The vehicle.
+    fn vehicle_id(&self) -> &str;
+    /// Messages in this item.
+    fn len(&self) -> usize;
+    /// Message `i` as sent.
+    fn message(&self, i: usize) -> Option<Self::Out>;
+}
+
+impl Watched for pb::VehicleHealth {
+    type Out = pb::VehicleHealth;
+    fn vehicle_id(&self) -> &str {
+        &self.vehicle_id
+    }
+    fn len(&self) -> usize {
+        1
+    }
+    fn message(&self, _: usize) -> Option<Self::Out> {
+        Some(self.clone())
+    }
+}
+
+impl Watched for PoseBatch {
+    type Out = pb::PoseEstimate;
+    fn vehicle_id(&self) -> &str {
+        &self.vehicle_id
+    }
+    fn len(&self) -> usize {
+        self.poses.len()
+    }
+    fn message(&self, i: usize) -> Option<Self::Out> {
+        self.wire(i)
+    }
+}
+
 /// Forwards the selected, decimated messages of a broadcast channel to a watch stream until the
 /// client leaves or the service stops.
-fn watch_stream<T, F>(
+fn watch_stream<T: Watched>(
     mut rx: broadcast::Receiver<Arc<T>>,
     sel: Selector,
     mut stopping: watch::Receiver<bool>,
-    id_of: F,
-) -> BoxStream<T>
-where
-    T: Clone + Send + Sync + 'static,
-    F: Fn(&T) -> &str + Send + 'static,
-{
+) -> BoxStream<T::Out> {
     let (tx, out) = mpsc::channel(WATCH_QUEUE);
     tokio::spawn(async move {
         let mut filter = WatchFilter::new(sel);
@@ -187,8 +221,11 @@ where
             while let Some(item) = next.take() {
                 match item {
                     Ok(m) => {
-                        if filter.keep(id_of(&m)) && tx.send(Ok((*m).clone())).await.is_err() {
-                            return;
+                        for i in filter.keep(m.vehicle_id(), m.len()) {
+                            let Some(out) = m.message(i) else { continue };
+                            if tx.send(Ok(out)).await.is_err() {
+                                return;
+                            }
                         }
                     }
                     // A slow watcher skips what it missed rather than slowing estimation down.
@@ -222,21 +259,24 @@ impl WatchFilter {
         }
     }
 
-    /// Whether the message of vehicle `id` goes out (selected, and the first of every
-    /// `decimation` of that vehicle).
-    fn keep(&mut self, id: &str) -> bool {
-        if !self.sel.matches(id) {
-            return false;
+    /// Which of the next `n` messages of vehicle `id` go out: none unless the vehicle is
+    /// selected, then the first of every `decimation` of that vehicle's messages.
+    fn keep(&mut self, id: &str, n: usize) -> std::iter::StepBy<std::ops::Range<usize>> {
+        if n == 0 || !self.sel.matches(id) {
+            return (0..0).step_by(1);
         }
-        if self.sel.decimation <= 1 {
-            return true;
+        let d = u64::from(self.sel.decimation.max(1));
+        if d == 1 {
+            return (0..n).step_by(1);
         }
-        let n = match self.seen.get_mut(id) {
-            Some(n) => n,
+        let seen = match self.seen.get_mut(id) {
+            Some(c) => c,
             None => self.seen.entry(id.to_owned()).or_insert(0),
         };
-        *n += 1;
-        (*n - 1).is_multiple_of(u64::from(self.sel.decimation))
+        // Messages are numbered per vehicle from 0; numbers divisible by `d` go out.
+        let first = ((d - *seen % d) % d) as usize;
+        *seen += n as u64;
+        (first.min(n)..n).step_by(d as usize)
     }
 }
 
@@ -300,12 +340,7 @@ impl UavNav for UavNavService {
     ) -> Result<Response<Self::WatchPosesStream>, Status> {
         let sel = Selector::from_request(request.get_ref())?;
         let rx = self.ingestor.registry().ctx().hub.poses.subscribe();
-        Ok(Response::new(watch_stream(
-            rx,
-            sel,
-            self.stopping(),
-            |p: &pb::PoseEstimate| &p.vehicle_id,
-        )))
+        Ok(Response::new(watch_stream(rx, sel, self.stopping())))
     }
 
     async fn watch_health(
@@ -314,12 +349,7 @@ impl UavNav for UavNavService {
     ) -> Result<Response<Self::WatchHealthStream>, Status> {
         let sel = Selector::from_request(request.get_ref())?;
         let rx = self.ingestor.registry().ctx().hub.health.subscribe();
-        Ok(Response::new(watch_stream(
-            rx,
-            sel,
-            self.stopping(),
-            |h: &pb::VehicleHealth| &h.vehicle_id,
-        )))
+        Ok(Response::new(watch_stream(rx, sel, self.stopping())))
     }
 
     async fn get_pose(
@@ -337,7 +367,7 @@ impl UavNav for UavNavService {
             .shared
             .pose()
             .ok_or_else(|| Status::not_found(format!("vehicle_id: {id:?} has no pose yet")))?;
-        Ok(Response::new((*pose).clone()))
+        Ok(Response::new(pose))
     }
 
     async fn list_vehicles(
@@ -401,5 +431,38 @@ pub fn summary_of(h: &crate::actor::VehicleHandle) -> pb::VehicleSummary {
             .last_input_wall_ns
             .load(std::sync::atomic::Ordering::Relaxed),
         configured: s.configured.load(std::sync::atomic::Ordering::Relaxed),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn filter(decimation: u32) -> WatchFilter {
+        WatchFilter::new(Selector {
+            ids: Vec::new(),
+            prefix: "a".into(),
+            all: false,
+            decimation,
+        })
+    }
+
+    /// Batches of any size keep exactly the messages a one-by-one count would: every
+    /// `decimation`-th of each vehicle's messages, numbered from 0, vehicles counted apart.
+    #[test]
+    fn decimation_across_batches_matches_a_per_message_count() {
+        for d in [1u32, 3, 10] {
+            let mut f = filter(d);
+            let (mut kept, mut base) = (Vec::new(), 0usize);
+            for n in [4usize, 1, 7, 0, 10, 3, 2, 25] {
+                kept.extend(f.keep("a1", n).map(|i| base + i));
+                // Another vehicle in between must not disturb a1's count.
+                let _ = f.keep("a2", 5).count();
+                base += n;
+            }
+            let expected: Vec<usize> = (0..base).filter(|k| k % d as usize == 0).collect();
+            assert_eq!(kept, expected, "decimation {d}");
+        }
+        assert_eq!(filter(2).keep("b1", 8).count(), 0, "unselected vehicle");
     }
 }

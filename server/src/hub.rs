@@ -1,6 +1,10 @@
 //! Output fan-out: every pose and health report of every vehicle goes through one broadcast channel
 //! each; the gRPC watchers and the Zenoh publisher subscribe and filter.
 //!
+//! Poses travel in [`PoseBatch`]es, the poses one actor produced for one input message (a few IMU
+//! samples' worth): at fleet scale poses come at IMU rate, and one ring slot, one wake-up of each
+//! subscriber and one reference count per batch instead of per pose is what keeps the fan-out cheap.
+//!
 //! A subscriber that falls behind loses the oldest messages (it is told how many), so a slow
 //! watcher never slows down estimation.
 
@@ -9,9 +13,10 @@ use std::sync::Arc;
 use tokio::sync::{broadcast, watch};
 use uavnav_proto::v1 as pb;
 
-/// Broadcast capacities: about one second of the whole fleet's poses at 2000 vehicles × 200 Hz
-/// would be 400k; a smaller ring keeps memory flat and lagging watchers skip.
-pub const POSE_CAPACITY: usize = 1 << 16;
+/// Pose ring size, in batches (typically 4–10 poses each): a second of the whole fleet's poses at
+/// 2000 vehicles × 200 Hz would be 400k poses; a smaller ring keeps memory flat (every slot holds
+/// its batch until overwritten) and lagging watchers skip.
+pub const POSE_CAPACITY: usize = 1 << 14;
 /// Health reports ring size.
 pub const HEALTH_CAPACITY: usize = 1 << 14;
 
@@ -19,7 +24,7 @@ pub const HEALTH_CAPACITY: usize = 1 << 14;
 #[derive(Debug, Clone)]
 pub struct Hub {
     /// Every pose.
-    pub poses: broadcast::Sender<Arc<pb::PoseEstimate>>,
+    pub poses: broadcast::Sender<Arc<PoseBatch>>,
     /// Every health report.
     pub health: broadcast::Sender<Arc<pb::VehicleHealth>>,
     /// Vehicle lifecycle (id, alive) for liveliness tokens.
@@ -44,5 +49,34 @@ impl Hub {
     /// Whether shutdown has begun.
     pub fn is_stopping(&self) -> bool {
         *self.stopping.borrow()
+    }
+}
+
+/// Consecutive poses of one vehicle, oldest first. The poses' own `vehicle_id` is left empty (one
+/// string per batch, not per pose): [`PoseBatch::wire`] fills it in for whoever sends one on.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoseBatch {
+    /// The vehicle.
+    pub vehicle_id: Arc<str>,
+    /// Its poses, `vehicle_id` empty.
+    pub poses: Vec<pb::PoseEstimate>,
+}
+
+impl PoseBatch {
+    /// Pose `i` as a complete wire message (`None` past the end).
+    pub fn wire(&self, i: usize) -> Option<pb::PoseEstimate> {
+        let mut p = self.poses.get(i)?.clone();
+        p.vehicle_id = self.vehicle_id.to_string();
+        Some(p)
+    }
+
+    /// The newest pose as a complete wire message.
+    pub fn last(&self) -> Option<pb::PoseEstimate> {
+        self.wire(self.poses.len().checked_sub(1)?)
+    }
+
+    /// Every pose as a complete wire message.
+    pub fn to_wire(&self) -> Vec<pb::PoseEstimate> {
+        (0..self.poses.len()).filter_map(|i| self.wire(i)).collect()
     }
 }

@@ -58,7 +58,7 @@ pub enum LiveError {
 /// What the view shows next.
 #[derive(Debug)]
 enum LiveMsg {
-    Pose(Arc<pb::PoseEstimate>),
+    Poses(Arc<crate::hub::PoseBatch>),
     Gnss(Arc<str>, pb::GnssFix),
     Camera(Arc<str>, pb::CameraFrame),
 }
@@ -78,8 +78,18 @@ impl LiveTap {
     }
 
     /// Shows a pose estimate.
-    pub fn pose(&self, p: Arc<pb::PoseEstimate>) {
-        self.send(LiveMsg::Pose(p));
+    /// Shows one pose estimate (a complete wire message, `vehicle_id` set).
+    pub fn pose(&self, mut p: pb::PoseEstimate) {
+        let vehicle_id: Arc<str> = std::mem::take(&mut p.vehicle_id).into();
+        self.poses(Arc::new(crate::hub::PoseBatch {
+            vehicle_id,
+            poses: vec![p],
+        }));
+    }
+
+    /// Shows a batch of pose estimates.
+    pub fn poses(&self, b: Arc<crate::hub::PoseBatch>) {
+        self.send(LiveMsg::Poses(b));
     }
 
     /// Shows a GNSS fix of `vehicle_id`.
@@ -179,7 +189,11 @@ fn split_addr(addr: &str) -> Result<(String, u16), LiveError> {
 async fn run(mut scene: Scene, mut rx: mpsc::Receiver<LiveMsg>) -> Scene {
     while let Some(m) = rx.recv().await {
         match m {
-            LiveMsg::Pose(p) => scene.pose(&p),
+            LiveMsg::Poses(b) => {
+                for p in &b.poses {
+                    scene.pose(&b.vehicle_id, p);
+                }
+            }
             LiveMsg::Gnss(id, f) => scene.gnss(&id, &f),
             LiveMsg::Camera(id, f) => scene.camera(&id, f),
         }
@@ -234,13 +248,13 @@ impl Scene {
             .unwrap_or_else(|| unreachable!("inserted above"))
     }
 
-    fn pose(&mut self, p: &pb::PoseEstimate) {
+    fn pose(&mut self, id: &str, p: &pb::PoseEstimate) {
         // An estimate without a valid position or attitude (initialising) has nothing to draw.
         let Some(lla) = p.position.as_ref().and_then(|g| Lla::try_from(g).ok()) else {
             return;
         };
         let frame = *self.frame.get_or_insert_with(|| LocalFrame::new(lla));
-        let v = self.vehicle(&p.vehicle_id);
+        let v = self.vehicle(id);
         if v.estimate_fix.has_sinks() {
             v.estimate_fix.log(&estimate_fix(p, &lla));
         }

@@ -143,7 +143,7 @@ async fn forward_poses(hub: Hub, tap: LiveTap) {
     loop {
         tokio::select! {
             p = poses.recv() => match p {
-                Ok(p) => tap.pose(p),
+                Ok(b) => tap.poses(b),
                 Err(tokio::sync::broadcast::error::RecvError::Lagged(n)) => tap.count_dropped(n),
                 Err(tokio::sync::broadcast::error::RecvError::Closed) => break,
             },

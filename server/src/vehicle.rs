@@ -162,7 +162,7 @@ pub struct VehicleShared {
     /// Service wall time of the latest input, ns since the UNIX epoch.
     pub last_input_wall_ns: AtomicI64,
     /// Latest pose.
-    pub latest_pose: watch::Sender<Option<Arc<pb::PoseEstimate>>>,
+    pub latest_pose: watch::Sender<Option<Arc<crate::hub::PoseBatch>>>,
     /// Latest health report.
     pub latest_health: watch::Sender<Option<Arc<pb::VehicleHealth>>>,
 }
@@ -208,8 +208,8 @@ impl VehicleShared {
     }
 
     /// The latest pose, if any.
-    pub fn pose(&self) -> Option<Arc<pb::PoseEstimate>> {
-        self.latest_pose.borrow().clone()
+    pub fn pose(&self) -> Option<pb::PoseEstimate> {
+        self.latest_pose.borrow().as_ref()?.last()
     }
 
     /// The latest health report, if any.

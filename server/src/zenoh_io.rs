@@ -33,7 +33,7 @@ use zenoh::key_expr::KeyExpr;
 use zenoh::liveliness::LivelinessToken;
 
 use crate::config::ZenohConfig;
-use crate::hub::Hub;
+use crate::hub::{Hub, PoseBatch};
 use crate::ingest::{Ingestor, Payload};
 use crate::metrics::{Kind, Outcome, Transport};
 use crate::vehicle::VehicleStats;
@@ -411,7 +411,7 @@ fn spawn_liveliness(
 /// what is left in the rings (the final health reports) and ends.
 async fn publish_outputs(
     session: Session,
-    mut poses: broadcast::Receiver<Arc<pb::PoseEstimate>>,
+    mut poses: broadcast::Receiver<Arc<PoseBatch>>,
     mut health: broadcast::Receiver<Arc<pb::VehicleHealth>>,
     ingestor: Ingestor,
     mut done: oneshot::Receiver<()>,
@@ -434,7 +434,7 @@ async fn publish_outputs(
                 Err(broadcast::error::RecvError::Closed) => break,
             },
             r = poses.recv() => match r {
-                Ok(p) if watched.any() => out.pose(&p).await,
+                Ok(b) if watched.any() => out.poses(&b).await,
                 Ok(_) => {}
                 Err(broadcast::error::RecvError::Lagged(n)) => {
                     metrics.zenoh_output_lagged.inc_by(n);
@@ -444,8 +444,8 @@ async fn publish_outputs(
             _ = &mut done => break,
         }
     }
-    while let Ok(p) = poses.try_recv() {
-        out.pose(&p).await;
+    while let Ok(b) = poses.try_recv() {
+        out.poses(&b).await;
     }
     while let Ok(h) = health.try_recv() {
         out.health(&h).await;
@@ -516,13 +516,14 @@ struct Outputs {
 }
 
 impl Outputs {
-    async fn pose(&self, p: &pb::PoseEstimate) {
-        self.put(
-            format!("{VEHICLE_PREFIX}/{}/pose", p.vehicle_id),
-            p.encode_to_vec(),
-            &self.pose_enc,
-        )
-        .await;
+    async fn poses(&self, b: &PoseBatch) {
+        let key = format!("{VEHICLE_PREFIX}/{}/pose", b.vehicle_id);
+        for i in 0..b.poses.len() {
+            if let Some(p) = b.wire(i) {
+                self.put(key.clone(), p.encode_to_vec(), &self.pose_enc)
+                    .await;
+            }
+        }
     }
 
     async fn health(&self, h: &pb::VehicleHealth) {

@@ -70,13 +70,13 @@ fn strip(mut p: pb::PoseEstimate) -> pb::PoseEstimate {
 }
 
 async fn collect(
-    rx: &mut tokio::sync::broadcast::Receiver<std::sync::Arc<pb::PoseEstimate>>,
+    rx: &mut tokio::sync::broadcast::Receiver<std::sync::Arc<uavnavd::hub::PoseBatch>>,
     n: usize,
 ) -> Vec<pb::PoseEstimate> {
     let mut got = Vec::with_capacity(n);
     let all = async {
         while got.len() < n {
-            got.push(strip((*rx.recv().await.unwrap()).clone()));
+            got.extend(rx.recv().await.unwrap().to_wire().into_iter().map(strip));
         }
     };
     tokio::time::timeout(Duration::from_secs(60), all)

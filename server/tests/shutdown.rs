@@ -59,9 +59,9 @@ async fn shutdown_drains_queued_data_and_publishes_final_health() {
     while all_health.try_recv().is_ok() {}
     server.shutdown().await.unwrap();
     let mut count = 0;
-    while let Ok(p) = all_poses.try_recv() {
-        assert!(p.vehicle_id.starts_with('d'));
-        count += 1;
+    while let Ok(b) = all_poses.try_recv() {
+        assert!(b.vehicle_id.starts_with('d'));
+        count += b.poses.len() as i64;
     }
     assert_eq!(count, 3 * n, "every accepted sample fused before exit");
     let mut finals = Vec::new();

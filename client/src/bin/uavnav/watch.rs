@@ -213,7 +213,7 @@ pub fn run(args: Args) -> CliResult {
                     Some(Ok(p)) => {
                         out.pose(&p)?;
                         if let Some(view) = &live {
-                            view.tap().pose(std::sync::Arc::new(p));
+                            view.tap().pose(p);
                         }
                         n += 1;
                         last = tokio::time::Instant::now();
