@@ -76,12 +76,14 @@ fn eskf_meets_targets_big_lever() {
 
 /// Paper profile with its default parameters (the gyro-bias allowance
 /// `EstimatorParams::paper_gyro_instability_psd` is derived from the simulated IMU), and an oracle
-/// whose rotation noise is that of the vision front end on these flights (40–90 µrad per axis; the
+/// whose noise is that of the vision front end on these flights: rotation 40–90 µrad per axis (the
 /// default oracle's 175 µrad accumulates in the eq. (34) pseudo-attitude to more than the gyro
-/// drift).
+/// drift), direction of travel 0.22° per axis (the front end's median error of 0.26°; the default
+/// oracle's 1° is 4× that).
 fn paper_cfg(video: bool) -> RunCfg {
     let oracle = Oracle {
         rot_sigma_rad: 70e-6,
+        dir_sigma_rad: 0.22f64.to_radians(),
         ..Oracle::default()
     };
     RunCfg::new(FilterProfile::Paper, true, video.then_some(oracle))
@@ -90,46 +92,43 @@ fn paper_cfg(video: bool) -> RunCfg {
 #[test]
 fn paper_profile_reproduces_the_qualitative_results() {
     // Section VI, on both lever-arm configurations (RMSE after 30 s, including the outage).
+    // Measured (roll/pitch/yaw °): small lever video 0.082/0.083/0.064, GNSS-only
+    // 0.512/0.460/0.562; big lever video 0.085/0.086/0.061, GNSS-only 0.392/0.343/0.154.
     let small_v = report("paper-small-lever", &paper_cfg(true));
     let small_g = report("paper-small-lever", &paper_cfg(false));
     let big_v = report("paper-big-lever", &paper_cfg(true));
     let big_g = report("paper-big-lever", &paper_cfg(false));
     let att = |r: &AccuracyReport| r.att_rmse_deg.unwrap();
-    // (a) Figs. 2–3: video-aided attitude beats GNSS-aided in every axis in both configurations;
-    // by more than 30 % except the big-lever yaw, which the lever arm already observes well
-    // (measured 0.12° with video vs 0.15° without).
+    // (a) Figs. 2–3: video-aided attitude beats GNSS-aided in every axis in both configurations,
+    // by more than 2× (measured 0.11–0.18× small lever, 0.22–0.40× big lever; the big-lever yaw,
+    // which the lever arm already observes, is the closest).
     for (name, v, g) in [("small", &small_v, &small_g), ("big", &big_v, &big_g)] {
         let (av, ag) = (att(v), att(g));
         assert!(
-            (0..3).all(|k| av[k] < ag[k]) && av[0] < 0.7 * ag[0] && av[1] < 0.7 * ag[1],
+            (0..3).all(|k| av[k] < 0.5 * ag[k]),
             "{name} lever: video {av:?} vs GNSS-only {ag:?}"
         );
     }
-    let (sv, sg) = (att(&small_v), att(&small_g));
-    assert!(
-        sv.z < 0.7 * sg.z,
-        "small lever yaw: video {sv:?} vs GNSS-only {sg:?}"
-    );
-    // (b) Fig. 3: without video the small lever arm leaves yaw worse (the GNSS reaches the
-    // attitude only through the lever arm; measured 1.6×, the gyro drift of the outage weighs on
-    // both); with video both configurations are alike in roll and pitch (within 1.7×: measured
-    // 0.16/0.17° small vs 0.12/0.11° big). NOT asserted because it does not hold: that the
-    // video-aided yaw is alike too (measured 0.32° small vs 0.12° big: the eq. (34) chain is
-    // relative; it drifts with the video's slowly varying yaw error, which only the lever arm
-    // corrects).
+    // (b) Fig. 3: without video the small lever arm leaves yaw much worse (the GNSS reaches the
+    // attitude only through the lever arm; measured 3.6×); with video both configurations are
+    // alike in all three axes (measured within 1.05×): the eq. (D1) direction of travel against
+    // the GNSS velocity observes the heading and the pitch whatever the lever arm (without it,
+    // `paper_video_direction = false`, the video-aided yaw is 0.32° small vs 0.12° big: the
+    // eq. (34) chain is relative and drifts with the video's rotation errors).
     let (sg, bg) = (att(&small_g), att(&big_g));
     assert!(
-        sg.z > 1.3 * bg.z,
+        sg.z > 2.5 * bg.z,
         "GNSS-only yaw small {sg:?} vs big {bg:?}"
     );
     let (sv, bv) = (att(&small_v), att(&big_v));
-    for k in 0..2 {
+    for k in 0..3 {
         assert!(
-            sv[k] < 1.7 * bv[k] && bv[k] < 1.7 * sv[k],
+            sv[k] < 1.3 * bv[k] && bv[k] < 1.3 * sv[k],
             "video {sv:?} vs {bv:?}"
         );
     }
-    // (c) Figs. 4–5: with video (VIDEO-IMU(2)) the outage is bridged far better than by coasting.
+    // (c) Figs. 4–5: with video (VIDEO-IMU(2)) the outage is bridged far better than by coasting
+    // (measured 2.3 % against 21.7 % / 15.6 % of the distance flown).
     for (v, g) in [(&small_v, &small_g), (&big_v, &big_g)] {
         assert!(
             v.outages[0].percent < 0.5 * g.outages[0].percent,

@@ -16,7 +16,8 @@
 //! (vision solver), `--vision-cov-scale K`, `--joint` / `--separate` (estimator),
 //! `--gyro-instability-psd Q` (paper profile: overrides `EstimatorParams::paper_gyro_instability_psd`,
 //! whose default is derived from the simulated IMU; the paper table uses the default),
-//! `--chain-cov-scale K` (paper: `EstimatorParams::paper_chain_cov_scale`), `--no-video-direction`
+//! `--chain-cov-scale K` (paper: `EstimatorParams::paper_chain_cov_scale`), `--direction-cov-scale K`
+//! (paper: `EstimatorParams::paper_direction_cov_scale`), `--no-video-direction`
 //! (paper: `EstimatorParams::paper_video_direction = false`, the paper's VIDEO-IMU(1) as written).
 //! The README "Results" table takes roll/pitch/yaw RMSE, the outage drift and "within 3σ" from the
 //! first table row printed, and the position consistency from the `consistency:` line.
@@ -58,13 +59,15 @@ struct Args {
     normal_sigma_deg: Option<f64>,
     gyro_instability_psd: Option<f64>,
     chain_cov_scale: Option<f64>,
+    direction_cov_scale: Option<f64>,
     video_direction: bool,
 }
 
 const USAGE: &str = "usage: paper_run [SCENARIO.toml] [--no-vision] [--profile eskf|paper] [--duration S]
     [--frames-csv F] [--frame-cache DIR] [--pixel-sigma PX] [--metric-scale-sigma REL]
     [--normal-sigma-deg D] [--vision-cov-scale K] [--joint | --separate]
-    [--gyro-instability-psd Q] [--chain-cov-scale K] [--no-video-direction]
+    [--gyro-instability-psd Q] [--chain-cov-scale K] [--direction-cov-scale K]
+    [--no-video-direction]
 Runs simulator -> rendered frames -> vision -> estimator on one scenario (default
 scenarios/paper-small-lever.toml, profile eskf) and prints the accuracy row (roll/pitch/yaw RMSE
 after 30 s, outage drift, share of samples within 3 sigma), consistency, vision statistics and time.";
@@ -84,6 +87,7 @@ fn parse_args() -> Args {
         normal_sigma_deg: None,
         gyro_instability_psd: None,
         chain_cov_scale: None,
+        direction_cov_scale: None,
         video_direction: true,
     };
     let mut it = std::env::args().skip(1);
@@ -112,6 +116,9 @@ fn parse_args() -> Args {
                 a.gyro_instability_psd = it.next().and_then(|s| s.parse().ok());
             }
             "--chain-cov-scale" => a.chain_cov_scale = it.next().and_then(|s| s.parse().ok()),
+            "--direction-cov-scale" => {
+                a.direction_cov_scale = it.next().and_then(|s| s.parse().ok());
+            }
             "--no-video-direction" => a.video_direction = false,
             "--help" | "-h" => {
                 println!("{USAGE}");
@@ -392,6 +399,9 @@ fn main() {
     if let Some(k) = args.chain_cov_scale {
         params.estimator.paper_chain_cov_scale = k;
     }
+    if let Some(k) = args.direction_cov_scale {
+        params.estimator.paper_direction_cov_scale = k;
+    }
     params.estimator.paper_video_direction = args.video_direction;
     if let Some(s) = args.metric_scale_sigma {
         params.vision.solve.metric_scale_sigma = s;
@@ -500,6 +510,10 @@ fn main() {
             t_first,
             &[(30.0, 120.0), (120.0, 240.0), (240.0, 250.0)]
         )
+    );
+    println!(
+        "{}",
+        calib::attitude_series(&poses, flight.truth(), t_first, 10.0)
     );
     println!(
         "{}",

@@ -300,8 +300,9 @@ impl AttitudeEkf {
         let nav_from_cam =
             q1.to_rotation_matrix().into_inner() * r_bc.to_rotation_matrix().into_inner();
         // `cov_scale`: the allowance for the egomotion errors' time correlation (see
-        // `EstimatorParams::vision_cov_scale`): the chain sums them, so its variance grows by the
-        // long-run (not the per-frame) variance of each delta. Eq. (C1): η grows by C_1 R_bc δθ.
+        // `EstimatorParams::paper_chain_cov_scale`): the chain sums them, so its variance grows
+        // by the long-run (not the per-frame) variance of each delta. Eq. (C1): η grows by
+        // C_1 R_bc δθ.
         let q_c = nav_from_cam * m.rot_cov * nav_from_cam.transpose() * cov_scale;
         let mut pcc = self.p.fixed_view_mut::<3, 3>(3, 3);
         pcc += q_c;

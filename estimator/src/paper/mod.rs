@@ -424,8 +424,8 @@ impl PaperFilter {
     }
 
     /// The inputs of eq. (D1) for egomotion `m` (see `attitude::AttitudeEkf::direction_update`):
-    /// the video direction of travel in body-1 axes with its covariance (`vision_cov_scale`
-    /// applied, as for every use of the video translation), and the GNSS-IMU filter's mean camera
+    /// the video direction of travel in body-1 axes with its covariance (times
+    /// `paper_direction_cov_scale`), and the GNSS-IMU filter's mean camera
     /// velocity over the frame pair: `(∫v dt + (C₁ − C₀) r_c) / Δt` (trapezoids over the velocity
     /// history; `r_c` the camera's offset from the IMU), with the filter's current velocity
     /// covariance (its error hardly changes over 0.1 s). `None` when the pair is not covered by the
@@ -450,7 +450,8 @@ impl PaperFilter {
             (None, None) => return None,
         };
         let dir_body = -(r_bc * t_cam);
-        let dir_cov_body = r_bc * cov_cam * r_bc.transpose() * self.params.vision_cov_scale;
+        let dir_cov_body =
+            r_bc * cov_cam * r_bc.transpose() * self.params.paper_direction_cov_scale;
         let dt_s = (m.t1_ns - m.t0_ns) as f64 * 1e-9;
         let (first, last) = (self.vel_hist.front()?, self.vel_hist.back()?);
         if dt_s <= 0.0 || first.0 > m.t0_ns || last.0 < m.t1_ns {

@@ -376,6 +376,29 @@ pub fn segment_errors(
 }
 
 /// Yaw error and stated yaw σ (deg) at every `step_s`, for a quick look at drifts and jumps.
+/// Roll, pitch and yaw errors (deg) every `step_s`: where the RMSE comes from.
+pub fn attitude_series(
+    poses: &[PoseOutput],
+    truth: &[TruthSample],
+    t0_ns: i64,
+    step_s: f64,
+) -> String {
+    let mut out = format!("attitude error (roll, pitch, yaw) every {step_s} s, deg:");
+    let mut next = 0.0;
+    for p in poses {
+        let t_s = (p.t_ns - t0_ns) as f64 * 1e-9;
+        if t_s < next {
+            continue;
+        }
+        next += step_s;
+        if let Some(t) = truth_at(truth, p.t_ns) {
+            let e = euler_error(&p.nav_from_body, &t.nav_from_body).map(f64::to_degrees);
+            out += &format!(" {t_s:.0}:{:+.3},{:+.3},{:+.3}", e.x, e.y, e.z);
+        }
+    }
+    out
+}
+
 pub fn yaw_series(poses: &[PoseOutput], truth: &[TruthSample], t0_ns: i64, step_s: f64) -> String {
     let mut out = format!("yaw error (σ) every {step_s} s, deg:");
     let mut next = 0.0;
