@@ -19,6 +19,10 @@
 //!   integration, as in section VI.
 //! - With video, the eq. (34) pseudo-attitude starts from the aligned attitude and is fused with
 //!   its accumulated error as a state (see [`attitude`]).
+//! - Beyond the paper (our addition, `EstimatorParams::paper_video_direction`): while GNSS
+//!   velocity is fused, the video's direction of travel rotated into NED with the attitude is
+//!   compared with the direction of the GNSS-IMU velocity (eq. D1, [`attitude`]), which observes
+//!   heading and pitch whatever the lever arm. During outages the direction goes to VIDEO-IMU(2).
 //!
 //! The un-modelled gyro bias is covered by extra process noise.
 
