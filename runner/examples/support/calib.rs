@@ -375,7 +375,24 @@ pub fn segment_errors(
     out
 }
 
-/// Yaw error and stated yaw σ (deg) at every `step_s`, for a quick look at drifts and jumps.
+/// The poses one every `step_s` of flight from `t0_ns`, each with its time (s) and the truth then.
+fn sampled<'a>(
+    poses: &'a [PoseOutput],
+    truth: &'a [TruthSample],
+    t0_ns: i64,
+    step_s: f64,
+) -> impl Iterator<Item = (f64, &'a PoseOutput, TruthSample)> + 'a {
+    let mut next = 0.0;
+    poses.iter().filter_map(move |p| {
+        let t_s = (p.t_ns - t0_ns) as f64 * 1e-9;
+        if t_s < next {
+            return None;
+        }
+        next += step_s;
+        truth_at(truth, p.t_ns).map(|t| (t_s, p, t))
+    })
+}
+
 /// Roll, pitch and yaw errors (deg) every `step_s`: where the RMSE comes from.
 pub fn attitude_series(
     poses: &[PoseOutput],
@@ -384,45 +401,31 @@ pub fn attitude_series(
     step_s: f64,
 ) -> String {
     let mut out = format!("attitude error (roll, pitch, yaw) every {step_s} s, deg:");
-    let mut next = 0.0;
-    for p in poses {
-        let t_s = (p.t_ns - t0_ns) as f64 * 1e-9;
-        if t_s < next {
-            continue;
-        }
-        next += step_s;
-        if let Some(t) = truth_at(truth, p.t_ns) {
-            let e = euler_error(&p.nav_from_body, &t.nav_from_body).map(f64::to_degrees);
-            out += &format!(" {t_s:.0}:{:+.3},{:+.3},{:+.3}", e.x, e.y, e.z);
-        }
+    for (t_s, p, t) in sampled(poses, truth, t0_ns, step_s) {
+        let e = euler_error(&p.nav_from_body, &t.nav_from_body).map(f64::to_degrees);
+        out += &format!(" {t_s:.0}:{:+.3},{:+.3},{:+.3}", e.x, e.y, e.z);
     }
     out
 }
 
+/// Yaw error and stated yaw σ (deg), gyro z-bias error and body-frame velocity error every
+/// `step_s`, for a quick look at drifts and jumps.
 pub fn yaw_series(poses: &[PoseOutput], truth: &[TruthSample], t0_ns: i64, step_s: f64) -> String {
     let mut out = format!("yaw error (σ) every {step_s} s, deg:");
-    let mut next = 0.0;
-    for p in poses {
-        let t_s = (p.t_ns - t0_ns) as f64 * 1e-9;
-        if t_s < next {
-            continue;
-        }
-        next += step_s;
-        if let Some(t) = truth_at(truth, p.t_ns) {
-            let e = euler_error(&p.nav_from_body, &t.nav_from_body).map(f64::to_degrees);
-            // gyro z-bias error, µrad/s (est − truth; truth in body axes)
-            let db = (p.gyro_bias_radps.z - t.gyro_bias_radps.z) * 1e6;
-            // velocity error in the true body frame (forward, right), mm/s
-            let dv = t.nav_from_body.inverse() * (p.vel_ned_mps - t.vel_ned_mps) * 1e3;
-            out += &format!(
-                " {t_s:.0}:{:+.3}({:.3})b{:+.0}v{:+.0},{:+.0}",
-                e.z,
-                p.sigma_att_rad.z.to_degrees(),
-                db,
-                dv.x,
-                dv.y
-            );
-        }
+    for (t_s, p, t) in sampled(poses, truth, t0_ns, step_s) {
+        let e = euler_error(&p.nav_from_body, &t.nav_from_body).map(f64::to_degrees);
+        // gyro z-bias error, µrad/s (est − truth; truth in body axes)
+        let db = (p.gyro_bias_radps.z - t.gyro_bias_radps.z) * 1e6;
+        // velocity error in the true body frame (forward, right), mm/s
+        let dv = t.nav_from_body.inverse() * (p.vel_ned_mps - t.vel_ned_mps) * 1e3;
+        out += &format!(
+            " {t_s:.0}:{:+.3}({:.3})b{:+.0}v{:+.0},{:+.0}",
+            e.z,
+            p.sigma_att_rad.z.to_degrees(),
+            db,
+            dv.x,
+            dv.y
+        );
     }
     out
 }
