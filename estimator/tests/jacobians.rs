@@ -514,7 +514,7 @@ fn paper_direction_of_travel_jacobian_matches_finite_differences() {
     ];
     for (e, u) in cases {
         let u = u.normalize();
-        let (_, h) = direction_model(&e, &u);
+        let (_, h, _) = direction_model(&e, &u);
         let d = 1e-6;
         for k in 0..3 {
             let (mut ep, mut em) = (e, e);

@@ -271,11 +271,11 @@ impl Actor {
                     }
                 }
                 () = &mut flush, if !self.buffer.is_empty() => {
-                    let due = self.last_input + flush_after;
-                    if Instant::now() >= due {
+                    let (due, now) = (self.last_input + flush_after, Instant::now());
+                    if now >= due {
                         self.flush_all();
                     }
-                    flush.as_mut().reset(tokio::time::Instant::from_std(due.max(Instant::now()) + FLUSH_SLACK));
+                    flush.as_mut().reset(tokio::time::Instant::from_std(due.max(now) + FLUSH_SLACK));
                 }
             }
             self.publish();

@@ -70,6 +70,27 @@ impl PoseBatch {
         Some(p)
     }
 
+    /// Pose `i` encoded as a complete wire message, without cloning it: the `vehicle_id` field
+    /// (1) first, then the pose's own fields (its empty id is not encoded). Protobuf decoders read
+    /// the concatenation as one message, the same as [`PoseBatch::wire`]'s encoding.
+    pub fn encode_wire(&self, i: usize) -> Option<Vec<u8>> {
+        use prost::Message;
+        use prost::encoding::{WireType, encode_key, encode_varint};
+        let p = self.poses.get(i)?;
+        if !p.vehicle_id.is_empty() {
+            // Not a batch the actor made (the id is already set): encode it as it is.
+            return Some(p.encode_to_vec());
+        }
+        let id = self.vehicle_id.as_bytes();
+        let mut buf = Vec::with_capacity(p.encoded_len() + id.len() + 6);
+        encode_key(1, WireType::LengthDelimited, &mut buf);
+        encode_varint(id.len() as u64, &mut buf);
+        buf.extend_from_slice(id);
+        // A Vec grows as needed: encoding into it cannot run out of room.
+        p.encode(&mut buf).ok()?;
+        Some(buf)
+    }
+
     /// The newest pose as a complete wire message.
     pub fn last(&self) -> Option<pb::PoseEstimate> {
         self.wire(self.poses.len().checked_sub(1)?)
@@ -78,5 +99,33 @@ impl PoseBatch {
     /// Every pose as a complete wire message.
     pub fn to_wire(&self) -> Vec<pb::PoseEstimate> {
         (0..self.poses.len()).filter_map(|i| self.wire(i)).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use prost::Message;
+
+    #[test]
+    fn encoded_pose_decodes_to_the_complete_wire_message() {
+        let pose = |t_ns| pb::PoseEstimate {
+            t_ns,
+            roll_rad: 0.25,
+            aiding_sources: vec![pb::AidingSource::GnssPosition as i32],
+            ..Default::default()
+        };
+        let b = PoseBatch {
+            vehicle_id: "uav-7".into(),
+            poses: vec![pose(1), pose(2)],
+        };
+        for i in 0..2 {
+            let bytes = b.encode_wire(i).unwrap();
+            let back = pb::PoseEstimate::decode(bytes.as_slice()).unwrap();
+            assert_eq!(Some(back), b.wire(i));
+            assert_eq!(b.wire(i).unwrap().vehicle_id, "uav-7");
+        }
+        assert_eq!(b.encode_wire(2), None);
+        assert_eq!(b.last().map(|p| p.t_ns), Some(2));
     }
 }

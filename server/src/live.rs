@@ -77,7 +77,6 @@ impl LiveTap {
         }
     }
 
-    /// Shows a pose estimate.
     /// Shows one pose estimate (a complete wire message, `vehicle_id` set).
     pub fn pose(&self, mut p: pb::PoseEstimate) {
         let vehicle_id: Arc<str> = std::mem::take(&mut p.vehicle_id).into();

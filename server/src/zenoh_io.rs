@@ -519,9 +519,8 @@ impl Outputs {
     async fn poses(&self, b: &PoseBatch) {
         let key = format!("{VEHICLE_PREFIX}/{}/pose", b.vehicle_id);
         for i in 0..b.poses.len() {
-            if let Some(p) = b.wire(i) {
-                self.put(key.clone(), p.encode_to_vec(), &self.pose_enc)
-                    .await;
+            if let Some(body) = b.encode_wire(i) {
+                self.put(key.clone(), body, &self.pose_enc).await;
             }
         }
     }

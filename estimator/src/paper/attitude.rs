@@ -392,8 +392,7 @@ impl AttitudeEkf {
             return false;
         }
         let (z, a_w) = course_path_angle(&w);
-        let (_, a_d) = course_path_angle(&d);
-        let (z_pred, h_e) = direction_model(&e1, &m.dir_body);
+        let (z_pred, h_e, a_d) = direction_model(&e1, &m.dir_body);
         let y = Vector2::new(wrap_pi(z.x - z_pred.x), z.y - z_pred.y);
         let mut h = SMatrix::<f64, 2, 6>::zeros();
         h.fixed_view_mut::<2, 3>(0, 0).copy_from(&h_e);
@@ -403,15 +402,15 @@ impl AttitudeEkf {
     }
 }
 
-/// Eq. (D1)'s prediction `h(e) = [χ(C(e) u); γ(C(e) u)]` for the body direction `u` and its
-/// Jacobian w.r.t. the Euler angles, `A(C u) ∂(C u)/∂e`.
+/// Eq. (D1)'s prediction `h(e) = [χ(C(e) u); γ(C(e) u)]` for the body direction `u`, its
+/// Jacobian w.r.t. the Euler angles, `A(C u) ∂(C u)/∂e`, and `A(C u)` itself (for the noise).
 pub fn direction_model(
     euler: &Vector3<f64>,
     u: &Vector3<f64>,
-) -> (Vector2<f64>, SMatrix<f64, 2, 3>) {
+) -> (Vector2<f64>, SMatrix<f64, 2, 3>, SMatrix<f64, 2, 3>) {
     let d = Rotation3::from_euler_angles(euler.x, euler.y, euler.z) * u;
     let (ang, a) = course_path_angle(&d);
-    (ang, a * lever_jacobian(euler, u))
+    (ang, a * lever_jacobian(euler, u), a)
 }
 
 /// Course and flight-path angle of a NED vector `x` and their Jacobian w.r.t. `x` (eq. D1):
