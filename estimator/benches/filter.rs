@@ -80,6 +80,34 @@ fn bench(c: &mut Criterion) {
         sigma_v_m: 2.6,
         sigma_vel_mps: 0.05,
     };
+    // One covariance prediction (every `cov_period_s`, 10 ms: every second IMU sample at 200 Hz).
+    let dynamics = uavnav_estimator::prediction::ErrorDynamics::new(
+        &x,
+        &uavnav_estimator::prediction::ImuMean {
+            gyro: Vector3::new(0.01, -0.02, 0.05),
+            accel: Vector3::new(0.3, -0.1, -9.7),
+        },
+        &Vector3::new(5e-5, 0.0, -4e-5),
+        300.0,
+    );
+    let noise = uavnav_estimator::prediction::ProcessNoise {
+        gyro_psd: 1e-8,
+        accel_psd: 1e-4,
+        gyro_bias_psd: 1e-12,
+        accel_bias_psd: 1e-8,
+        gm_psd: [0.01, 0.01, 0.02],
+        gm_tau_s: 300.0,
+    };
+    c.bench_function("eskf_cov_propagate (24 states, 10 ms)", |b| {
+        b.iter_batched(
+            || p0,
+            |mut p| {
+                dynamics.propagate(&mut p, 0.01, &noise);
+                std::hint::black_box(p)
+            },
+            BatchSize::SmallInput,
+        )
+    });
     let r = white_noise(&m, 0.9, 0.05);
     let gyro = Vector3::new(0.01, -0.02, 0.05);
     let w_ie = Vector3::new(5e-5, 0.0, -4e-5);

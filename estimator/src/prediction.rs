@@ -12,7 +12,7 @@
 use nalgebra::{Matrix3, Vector3};
 use uavnav_core::rotation::skew;
 
-use crate::state::{Cov, IBA, IBG, IGM, IP, ITH, IV, N, Nominal, exp_q};
+use crate::state::{Cov, IBA, IBG, ICP, ICTH, IGM, IP, ITH, IV, N, Nominal, exp_q};
 
 /// A mean IMU sample over an integration interval (bias not removed).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -110,63 +110,147 @@ impl ErrorDynamics {
         Cov::identity() + a * dt_s
     }
 
-    /// `P ← F P Fᵀ + Q dt` with `F = I + A dt`, in place: `M = P + dt·A P` touches only the 12
-    /// rows where `A` is non-zero, `P' = M + dt·M Aᵀ` only the same 12 columns (3×24 blocks, no
-    /// 24×24 products).
+    /// `P ← F P Fᵀ + Q dt` with `F = I + A dt`, in place.
+    ///
+    /// With `G = A dt` and `P` symmetric, `F P Fᵀ = P + B + Bᵀ + B Gᵀ` where `B = G P`. `G` has only
+    /// 12 non-zero rows (position, velocity, attitude, GNSS error), so `B` is 12 rows of `P`
+    /// combined 3×3-blockwise and `E = B Gᵀ` a 12×12 block. With `D = B + ½E` (12 rows),
+    /// `P' = P + D + Dᵀ`: outside the 12×12 block row `a` of `D` is added to row and column `a`;
+    /// inside it each pair `D_ab + D_ba` is summed once and written to both places, so an exactly
+    /// symmetric `P` (every writer of `P` keeps it so) stays exactly symmetric. Plain loops over
+    /// contiguous columns: this runs every `cov_period_s` for every vehicle of the service, and
+    /// nalgebra's generic block products and a full symmetrising pass cost several times more.
     pub fn propagate(&self, p: &mut Cov, dt_s: f64, q: &ProcessNoise) {
-        let (avth, c, wx, k) = (
-            self.a_v_th * dt_s,
-            self.c * dt_s,
-            self.w_ie_x * dt_s,
-            self.inv_tau * dt_s,
-        );
-        let d_p = p.fixed_rows::<3>(IV) * dt_s;
-        let d_v = avth * p.fixed_rows::<3>(ITH)
-            - c * p.fixed_rows::<3>(IBA)
-            - 2.0 * wx * p.fixed_rows::<3>(IV);
-        let d_th = -wx * p.fixed_rows::<3>(ITH) - c * p.fixed_rows::<3>(IBG);
-        let d_gm = p.fixed_rows::<3>(IGM) * -k;
-        {
-            let mut blk = p.fixed_rows_mut::<3>(IP);
-            blk += &d_p;
+        let g = StepBlocks::new(self, dt_s);
+        let mut d = g.rows_of_gp(p.as_slice());
+        for row in d.iter_mut() {
+            let e = g.row_times_gt(row);
+            for (c, &rc) in ACTIVE.iter().enumerate() {
+                row[rc] += 0.5 * e[c];
+            }
         }
-        {
-            let mut blk = p.fixed_rows_mut::<3>(IV);
-            blk += &d_v;
-        }
-        {
-            let mut blk = p.fixed_rows_mut::<3>(ITH);
-            blk += &d_th;
-        }
-        {
-            let mut blk = p.fixed_rows_mut::<3>(IGM);
-            blk += &d_gm;
-        }
-        let e_p = p.fixed_columns::<3>(IV) * dt_s;
-        let e_v = p.fixed_columns::<3>(ITH) * avth.transpose()
-            - p.fixed_columns::<3>(IBA) * c.transpose()
-            - 2.0 * p.fixed_columns::<3>(IV) * wx.transpose();
-        let e_th =
-            -p.fixed_columns::<3>(ITH) * wx.transpose() - p.fixed_columns::<3>(IBG) * c.transpose();
-        let e_gm = p.fixed_columns::<3>(IGM) * -k;
-        {
-            let mut blk = p.fixed_columns_mut::<3>(IP);
-            blk += &e_p;
-        }
-        {
-            let mut blk = p.fixed_columns_mut::<3>(IV);
-            blk += &e_v;
-        }
-        {
-            let mut blk = p.fixed_columns_mut::<3>(ITH);
-            blk += &e_th;
-        }
-        {
-            let mut blk = p.fixed_columns_mut::<3>(IGM);
-            blk += &e_gm;
+        let s = p.as_mut_slice();
+        for (a, &ra) in ACTIVE.iter().enumerate() {
+            for &j in &PASSIVE {
+                s[ra + j * N] += d[a][j];
+                s[j + ra * N] += d[a][j];
+            }
+            for (b, &rb) in ACTIVE.iter().enumerate().skip(a) {
+                let v = d[a][rb] + d[b][ra];
+                s[ra + rb * N] += v;
+                if rb != ra {
+                    s[rb + ra * N] += v;
+                }
+            }
         }
         add_process_noise(p, dt_s, q);
-        symmetrize(p);
+    }
+}
+
+/// The error states whose dynamics rows are zero (biases, clone): only `B`'s columns reach them.
+const PASSIVE: [usize; 12] = [
+    IBG,
+    IBG + 1,
+    IBG + 2,
+    IBA,
+    IBA + 1,
+    IBA + 2,
+    ICTH,
+    ICTH + 1,
+    ICTH + 2,
+    ICP,
+    ICP + 1,
+    ICP + 2,
+];
+
+/// The error states whose dynamics rows are non-zero, in the order of [`StepBlocks`]' rows.
+const ACTIVE: [usize; 12] = [
+    IP,
+    IP + 1,
+    IP + 2,
+    IV,
+    IV + 1,
+    IV + 2,
+    ITH,
+    ITH + 1,
+    ITH + 2,
+    IGM,
+    IGM + 1,
+    IGM + 2,
+];
+
+/// The non-zero blocks of `G = A dt`, as plain arrays (row-major 3×3).
+struct StepBlocks {
+    dt: f64,
+    /// `−[C f̂]× dt`.
+    v_th: [[f64; 3]; 3],
+    /// `C dt` (enters negated).
+    c: [[f64; 3]; 3],
+    /// `[ω_ie]× dt`.
+    w: [[f64; 3]; 3],
+    /// `dt / τ` (enters negated).
+    k: f64,
+}
+
+fn rows3(m: &Matrix3<f64>, dt: f64) -> [[f64; 3]; 3] {
+    std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)] * dt))
+}
+
+impl StepBlocks {
+    fn new(e: &ErrorDynamics, dt: f64) -> Self {
+        Self {
+            dt,
+            v_th: rows3(&e.a_v_th, dt),
+            c: rows3(&e.c, dt),
+            w: rows3(&e.w_ie_x, dt),
+            k: e.inv_tau * dt,
+        }
+    }
+
+    /// `x(j) = Σ_k m[i][k]·y(k, j)` accumulated with `sign` into `out`, for the 3 columns of `p`
+    /// starting at `col` (columns of a symmetric `P` are its rows).
+    fn axpy3(out: &mut [f64; N], m: &[f64; 3], sign: f64, p: &[f64], col: usize) {
+        for (k, &mk) in m.iter().enumerate() {
+            let f = sign * mk;
+            let src = &p[(col + k) * N..(col + k) * N + N];
+            for (o, &x) in out.iter_mut().zip(src) {
+                *o += f * x;
+            }
+        }
+    }
+
+    /// The 12 active rows of `B = G P` (`p` column-major and symmetric).
+    fn rows_of_gp(&self, p: &[f64]) -> [[f64; N]; 12] {
+        let mut b = [[0.0; N]; 12];
+        for i in 0..3 {
+            let col = &p[(IV + i) * N..(IV + i) * N + N];
+            for (o, &x) in b[i].iter_mut().zip(col) {
+                *o = self.dt * x;
+            }
+            Self::axpy3(&mut b[3 + i], &self.v_th[i], 1.0, p, ITH);
+            Self::axpy3(&mut b[3 + i], &self.c[i], -1.0, p, IBA);
+            Self::axpy3(&mut b[3 + i], &self.w[i], -2.0, p, IV);
+            Self::axpy3(&mut b[6 + i], &self.w[i], -1.0, p, ITH);
+            Self::axpy3(&mut b[6 + i], &self.c[i], -1.0, p, IBG);
+            let col = &p[(IGM + i) * N..(IGM + i) * N + N];
+            for (o, &x) in b[9 + i].iter_mut().zip(col) {
+                *o = -self.k * x;
+            }
+        }
+        b
+    }
+
+    /// One row of `B` times `Gᵀ`, at the active columns (the order of [`ACTIVE`]).
+    fn row_times_gt(&self, r: &[f64; N]) -> [f64; 12] {
+        let dot = |m: &[f64; 3], at: usize| m[0] * r[at] + m[1] * r[at + 1] + m[2] * r[at + 2];
+        let mut e = [0.0; 12];
+        for i in 0..3 {
+            e[i] = self.dt * r[IV + i];
+            e[3 + i] = dot(&self.v_th[i], ITH) - dot(&self.c[i], IBA) - 2.0 * dot(&self.w[i], IV);
+            e[6 + i] = -dot(&self.w[i], ITH) - dot(&self.c[i], IBG);
+            e[9 + i] = -self.k * r[IGM + i];
+        }
+        e
     }
 }
 
@@ -225,5 +309,69 @@ impl GravityCache {
     /// Gravity at `p` from the cache without refreshing.
     pub fn peek(&self, p: &Vector3<f64>) -> Vector3<f64> {
         self.g + Vector3::new(0.0, 0.0, FREE_AIR_GRADIENT * (p.z - self.at_m.z))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::UnitQuaternion;
+
+    fn nominal() -> Nominal {
+        Nominal {
+            t_ns: 0,
+            p: Vector3::new(120.0, -40.0, -200.0),
+            v: Vector3::new(25.0, 12.0, -1.5),
+            q: UnitQuaternion::from_euler_angles(0.1, -0.2, 2.0),
+            bg: Vector3::new(1e-3, -2e-3, 5e-4),
+            ba: Vector3::new(0.02, -0.01, 0.03),
+            gm: Vector3::new(0.5, -0.3, 1.0),
+            clone: None,
+        }
+    }
+
+    /// A dense symmetric positive-definite matrix from a fixed pseudo-random `L Lᵀ`.
+    fn spd(seed: u64) -> Cov {
+        let mut x = seed;
+        let l = Cov::from_fn(|_, _| {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((x >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+        });
+        let mut p = l * l.transpose() + Cov::identity() * 1e-3;
+        symmetrize(&mut p);
+        p
+    }
+
+    #[test]
+    fn propagate_equals_dense_f_p_ft_plus_q() {
+        let imu = ImuMean {
+            gyro: Vector3::new(0.05, -0.02, 0.17),
+            accel: Vector3::new(1.2, 2.5, -9.5),
+        };
+        let dynamics = ErrorDynamics::new(&nominal(), &imu, &earth_rate_ned(0.7), 300.0);
+        let q = ProcessNoise {
+            gyro_psd: 1e-6,
+            accel_psd: 1e-3,
+            gyro_bias_psd: 1e-9,
+            accel_bias_psd: 1e-7,
+            gm_psd: [0.01, 0.02, 0.03],
+            gm_tau_s: 300.0,
+        };
+        for (seed, dt) in [(1, 0.01), (2, 0.005), (3, 0.1)] {
+            let p0 = spd(seed);
+            let f = dynamics.dense_f(dt);
+            let mut want = f * p0 * f.transpose();
+            add_process_noise(&mut want, dt, &q);
+            let mut got = p0;
+            dynamics.propagate(&mut got, dt, &q);
+            let err = (got - want).abs().max();
+            assert!(
+                err < 1e-12 * p0.abs().max(),
+                "seed {seed}: max error {err:e}"
+            );
+            assert_eq!(got, got.transpose(), "exactly symmetric");
+        }
     }
 }
