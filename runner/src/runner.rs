@@ -227,22 +227,27 @@ impl VehicleRunner {
 
     /// Pushes one event. Errors leave the runner unchanged.
     pub fn push(&mut self, event: SensorEvent) -> Result<Step, RunnerError> {
+        let mut step = Step::default();
+        self.push_into(event, &mut step)?;
+        Ok(step)
+    }
+
+    /// [`VehicleRunner::push`] appending to `step` (poses added at its end; `step.job` must be
+    /// empty), so that a caller pushing at IMU rate reuses one allocation.
+    pub fn push_into(&mut self, event: SensorEvent, step: &mut Step) -> Result<(), RunnerError> {
         if let SensorEvent::Camera(f) = &event
             && self.config.camera.is_none()
         {
             return Err(RunnerError::NoCamera { t_ns: f.t_ns });
         }
         if self.must_hold(&event) {
-            let mut step = Step::default();
             if self.hold(event) {
                 // The job was abandoned: what it held back flows again (never lose IMU).
-                self.replay(&mut step);
+                self.replay(step);
             }
-            return Ok(step);
+            return Ok(());
         }
-        let mut step = Step::default();
-        self.process(event, &mut step)?;
-        Ok(step)
+        self.process(event, step)
     }
 
     /// Hands back a finished job; replays held events (which may start the next job).

@@ -64,6 +64,17 @@ impl std::fmt::Debug for EngineStep {
 pub trait Engine: Send + 'static {
     /// Fuses one input.
     fn push(&mut self, event: SensorEvent) -> Result<EngineStep, EngineError>;
+    /// [`Engine::push`] appending the poses to `poses` (the actor's outbox) and returning the
+    /// vision work: no allocation per input for engines that override it.
+    fn push_into(
+        &mut self,
+        event: SensorEvent,
+        poses: &mut Vec<pb::PoseEstimate>,
+    ) -> Result<Option<VisionWork>, EngineError> {
+        let step = self.push(event)?;
+        poses.extend(step.poses);
+        Ok(step.work)
+    }
     /// Hands back the result of the vision job the engine produced last.
     fn finish_frame(&mut self, done: VisionResult) -> EngineStep;
     /// Current self-assessment.

@@ -4,7 +4,7 @@
 //! Ties in time are broken by kind (IMU, then GNSS, then camera: a measurement at `t` is fused after
 //! the IMU has propagated to `t`) and then by arrival order, so the output is deterministic.
 
-use std::collections::BTreeMap;
+use std::collections::VecDeque;
 
 /// Why an item was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -15,11 +15,18 @@ pub enum Refused {
     Duplicate,
 }
 
+/// The order of items: time, then kind, then arrival.
+type Key = (i64, u8, u64);
+
 /// The reorder buffer. `K` is a small ordinal that breaks ties between kinds.
+///
+/// A sorted ring rather than a tree: inputs nearly always arrive in order, so an insert is a push at
+/// the back, a release a pop at the front, and an out-of-order insert shifts only the few items of
+/// the window behind it (a B-tree shifts its leaf's items on every release instead).
 #[derive(Debug)]
 pub struct ReorderBuffer<T> {
     window_ns: i64,
-    items: BTreeMap<(i64, u8, u64), T>,
+    items: VecDeque<(Key, T)>,
     newest_ns: Option<i64>,
     released_ns: Option<i64>,
     seq: u64,
@@ -32,7 +39,7 @@ impl<T> ReorderBuffer<T> {
     pub fn new(window_ns: i64, capacity: usize) -> Self {
         Self {
             window_ns: window_ns.max(0),
-            items: BTreeMap::new(),
+            items: VecDeque::new(),
             newest_ns: None,
             released_ns: None,
             seq: 0,
@@ -45,16 +52,18 @@ impl<T> ReorderBuffer<T> {
         if self.released_ns.is_some_and(|r| t_ns < r) {
             return Err(Refused::Late);
         }
-        if self
-            .items
-            .range((t_ns, kind, 0)..=(t_ns, kind, u64::MAX))
-            .next()
-            .is_some()
-        {
+        self.seq += 1;
+        let key = (t_ns, kind, self.seq);
+        // Where the key goes: after every item that sorts before it (all of them, usually).
+        let at = match self.items.back() {
+            Some((k, _)) if *k > key => self.items.partition_point(|(k, _)| *k < key),
+            _ => self.items.len(),
+        };
+        // A duplicate (same time and kind) sorts just before the key (its arrival is older).
+        if at > 0 && self.items[at - 1].0.0 == t_ns && self.items[at - 1].0.1 == kind {
             return Err(Refused::Duplicate);
         }
-        self.seq += 1;
-        self.items.insert((t_ns, kind, self.seq), item);
+        self.items.insert(at, (key, item));
         self.newest_ns = Some(self.newest_ns.map_or(t_ns, |n| n.max(t_ns)));
         Ok(())
     }
@@ -62,8 +71,8 @@ impl<T> ReorderBuffer<T> {
     /// The next item whose hold time has passed (or that overflows the capacity), oldest first.
     pub fn pop_ready(&mut self) -> Option<(i64, T)> {
         let newest = self.newest_ns?;
-        let (&(t, _, _), _) = self.items.first_key_value()?;
-        let due = t <= newest.saturating_sub(self.window_ns);
+        let ((t, _, _), _) = self.items.front()?;
+        let due = *t <= newest.saturating_sub(self.window_ns);
         if due || self.items.len() > self.capacity {
             return self.pop_first();
         }
@@ -72,7 +81,7 @@ impl<T> ReorderBuffer<T> {
 
     /// The oldest item regardless of the window (for flushing an idle or stopping vehicle).
     pub fn pop_first(&mut self) -> Option<(i64, T)> {
-        let ((t, _, _), item) = self.items.pop_first()?;
+        let ((t, _, _), item) = self.items.pop_front()?;
         self.released_ns = Some(self.released_ns.map_or(t, |r| r.max(t)));
         Some((t, item))
     }
@@ -126,6 +135,22 @@ mod tests {
             .map(|(_, x)| x)
             .collect();
         assert_eq!(out, ["imu", "gnss", "cam"]);
+    }
+
+    #[test]
+    fn out_of_order_duplicates_are_found() {
+        let mut b = ReorderBuffer::new(100, 100);
+        for t in [10, 30, 20, 40] {
+            b.push(t, 0, t).unwrap();
+        }
+        assert_eq!(b.push(20, 0, 0), Err(Refused::Duplicate));
+        assert_eq!(b.push(30, 0, 0), Err(Refused::Duplicate));
+        assert_eq!(b.push(20, 1, 21), Ok(()));
+        assert_eq!(b.push(25, 0, 25), Ok(()));
+        let out: Vec<_> = std::iter::from_fn(|| b.pop_first())
+            .map(|(_, x)| x)
+            .collect();
+        assert_eq!(out, [10, 20, 21, 25, 30, 40]);
     }
 
     #[test]

@@ -5,7 +5,9 @@ use uavnav_core::{SensorEvent, VehicleConfig};
 use uavnav_proto::v1 as pb;
 use uavnav_runner::{Health, Mode, PoseOutput, RunnerParams, Step, VehicleRunner, VisionDone};
 
-use crate::engine::{Engine, EngineError, EngineFactory, EngineHealth, EngineStep, VisionResult};
+use crate::engine::{
+    Engine, EngineError, EngineFactory, EngineHealth, EngineStep, VisionResult, VisionWork,
+};
 
 /// Builds [`RunnerEngine`]s with the same parameters for every vehicle.
 #[derive(Debug, Clone)]
@@ -37,6 +39,7 @@ impl EngineFactory for RunnerFactory {
         Box::new(RunnerEngine {
             runner: VehicleRunner::new(config.clone(), self.params.clone(), None),
             last_t_ns: 0,
+            scratch: Step::default(),
         })
     }
 }
@@ -46,6 +49,8 @@ impl EngineFactory for RunnerFactory {
 pub struct RunnerEngine {
     runner: VehicleRunner,
     last_t_ns: i64,
+    /// Reused for every input (one pose per IMU sample: no allocation per sample).
+    scratch: Step,
 }
 
 impl RunnerEngine {
@@ -55,9 +60,7 @@ impl RunnerEngine {
         }
         EngineStep {
             poses: step.poses.iter().map(pose_to_wire).collect(),
-            work: step
-                .job
-                .map(|job| Box::new(move || Box::new(job.run()) as VisionResult) as _),
+            work: step.job.map(vision_work),
         }
     }
 }
@@ -69,6 +72,21 @@ impl Engine for RunnerEngine {
             .push(event)
             .map_err(|e| EngineError(e.to_string()))?;
         Ok(self.step(step))
+    }
+
+    fn push_into(
+        &mut self,
+        event: SensorEvent,
+        poses: &mut Vec<pb::PoseEstimate>,
+    ) -> Result<Option<VisionWork>, EngineError> {
+        self.scratch.poses.clear();
+        let r = self.runner.push_into(event, &mut self.scratch);
+        if let Some(p) = self.scratch.poses.last() {
+            self.last_t_ns = p.t_ns;
+        }
+        poses.extend(self.scratch.poses.iter().map(pose_to_wire));
+        r.map_err(|e| EngineError(e.to_string()))?;
+        Ok(self.scratch.job.take().map(vision_work))
     }
 
     fn finish_frame(&mut self, done: VisionResult) -> EngineStep {
@@ -120,6 +138,11 @@ impl Engine for RunnerEngine {
         let step = self.runner.abandon_job();
         self.step(step)
     }
+}
+
+/// A runner job as pool work.
+fn vision_work(job: uavnav_runner::VisionJob) -> VisionWork {
+    Box::new(move || Box::new(job.run()) as VisionResult)
 }
 
 fn innovation(h: &Health) -> pb::InnovationRatios {
