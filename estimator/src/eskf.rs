@@ -246,18 +246,19 @@ impl Eskf {
         while self.imu.len() >= 2 && self.imu[1].t_ns <= target {
             self.step();
         }
-        let frame = self.frame?;
-        let x = self.x?;
+        // Borrowed, not copied: this runs for every IMU sample of every vehicle of the service.
+        let (Some(frame), Some(x)) = (self.frame.as_ref(), self.x.as_ref()) else {
+            return None;
+        };
         let tau = self.params.gnss_pos_tau_s;
         if self.corrected || self.out.x.is_none() {
-            self.out
-                .resync(&frame, &x, self.imu.iter(), &self.w_ie, tau);
+            self.out.resync(frame, x, self.imu.iter(), &self.w_ie, tau);
         } else if let Some(prev) = prev_newest {
             if let Some(o) = self.out.x.as_mut() {
                 o.bg = x.bg;
                 o.ba = x.ba;
             }
-            self.out.advance(&frame, &prev, s, &self.w_ie, tau);
+            self.out.advance(frame, &prev, s, &self.w_ie, tau);
         }
         self.output()
     }

@@ -492,9 +492,7 @@ impl Actor {
             vehicle_id: Arc::clone(&self.shared.id),
             poses: std::mem::replace(&mut self.outbox, Vec::with_capacity(n)),
         });
-        self.shared
-            .latest_pose
-            .send_replace(Some(Arc::clone(&batch)));
+        self.shared.set_latest_pose(Arc::clone(&batch));
         let _ = self.ctx.hub.poses.send(batch);
         self.ctx.metrics.poses.inc_by(n as u64);
     }

@@ -169,32 +169,14 @@ impl Ingestor {
         let h = self.vehicle(id)?;
         let ctx = self.registry.ctx();
         let (at, wall) = (Instant::now(), wall_ns());
-        let (n, mut batch, mut late, mut future) =
-            (samples.len(), Vec::with_capacity(samples.len()), 0, 0);
-        let mut first_refusal = None;
-        for (i, s) in samples.into_iter().enumerate() {
-            let field = || format!("imu.samples[{i}]");
-            match h.shared.admit(
-                InputKind::Imu,
-                s.t_ns,
-                ctx.window_ns(),
-                ctx.max_future_ns(),
-                field,
-            ) {
-                Ok(()) => batch.push(Stamped {
-                    input: Input::Imu(s),
-                    wall_ns: wall,
-                    at,
-                }),
-                Err(r) => {
-                    match &r {
-                        GateRefusal::Late(_) => late += 1,
-                        GateRefusal::Future(_) => future += 1,
-                    }
-                    first_refusal.get_or_insert(r);
-                }
-            }
-        }
+        let n = samples.len();
+        let limits = (ctx.window_ns(), ctx.max_future_ns());
+        let Admitted {
+            batch,
+            late,
+            future,
+            first_refusal,
+        } = admit_imu(&h.shared, samples, at, wall, limits);
         let accepted = batch.len() as u64;
         if accepted == 0 {
             // Counted once, as a refused message, by `submit`.
@@ -235,8 +217,8 @@ impl Ingestor {
             .admit(
                 InputKind::Gnss,
                 fix.t_ns,
-                ctx.window_ns(),
-                ctx.max_future_ns(),
+                wall_ns(),
+                (ctx.window_ns(), ctx.max_future_ns()),
                 || "gnss".into(),
             )
             .map_err(|r| gate_rejection(Some(r)))?;
@@ -281,8 +263,8 @@ impl Ingestor {
             .admit(
                 InputKind::Camera,
                 frame.t_ns,
-                ctx.window_ns(),
-                ctx.max_future_ns(),
+                wall_ns(),
+                (ctx.window_ns(), ctx.max_future_ns()),
                 || "camera".into(),
             )
             .map_err(|r| gate_rejection(Some(r)))?;
@@ -382,6 +364,57 @@ impl Ingestor {
         let _ = rx.await;
         Ok(Some(()))
     }
+}
+
+/// The IMU samples of one message that passed the vehicle's time gate.
+struct Admitted {
+    batch: Vec<Stamped>,
+    late: u64,
+    future: u64,
+    first_refusal: Option<GateRefusal>,
+}
+
+/// Runs a batch of IMU samples through the time gate under one lock (a plain function: the guard
+/// must not live across an await).
+fn admit_imu(
+    shared: &crate::vehicle::VehicleShared,
+    samples: Vec<uavnav_core::ImuSample>,
+    at: Instant,
+    wall: i64,
+    (window_ns, max_future_ns): (i64, i64),
+) -> Admitted {
+    let mut out = Admitted {
+        batch: Vec::with_capacity(samples.len()),
+        late: 0,
+        future: 0,
+        first_refusal: None,
+    };
+    let mut gate = shared.gate();
+    for (i, s) in samples.into_iter().enumerate() {
+        let field = || format!("imu.samples[{i}]");
+        match gate.admit(
+            InputKind::Imu,
+            s.t_ns,
+            wall,
+            window_ns,
+            max_future_ns,
+            field,
+        ) {
+            Ok(()) => out.batch.push(Stamped {
+                input: Input::Imu(s),
+                wall_ns: wall,
+                at,
+            }),
+            Err(r) => {
+                match &r {
+                    GateRefusal::Late(_) => out.late += 1,
+                    GateRefusal::Future(_) => out.future += 1,
+                }
+                out.first_refusal.get_or_insert(r);
+            }
+        }
+    }
+    out
 }
 
 fn registry_rejection(e: RegistryError) -> Rejection {

@@ -161,8 +161,9 @@ pub struct VehicleShared {
     pub frames_queued: AtomicUsize,
     /// Service wall time of the latest input, ns since the UNIX epoch.
     pub last_input_wall_ns: AtomicI64,
-    /// Latest pose.
-    pub latest_pose: watch::Sender<Option<Arc<crate::hub::PoseBatch>>>,
+    /// Latest pose batch (a plain slot: nobody waits for changes, and a watch channel's sender
+    /// would notify its waiter lists on every message).
+    pub latest_pose: Mutex<Option<Arc<crate::hub::PoseBatch>>>,
     /// Latest health report.
     pub latest_health: watch::Sender<Option<Arc<pb::VehicleHealth>>>,
 }
@@ -178,23 +179,28 @@ impl VehicleShared {
             configured: AtomicBool::new(false),
             frames_queued: AtomicUsize::new(0),
             last_input_wall_ns: AtomicI64::new(0),
-            latest_pose: watch::channel(None).0,
+            latest_pose: Mutex::new(None),
             latest_health: watch::channel(None).0,
         }
     }
 
-    /// Runs the time gate (a poisoned lock only means another thread panicked mid-check: the
-    /// gate's state is still consistent, so it is used as is).
+    /// Runs the time gate at the service wall time `wall_ns` (a poisoned lock only means another
+    /// thread panicked mid-check: the gate's state is still consistent, so it is used as is).
     pub fn admit(
         &self,
         kind: InputKind,
         t_ns: i64,
-        window_ns: i64,
-        max_future_ns: i64,
+        wall_ns: i64,
+        limits: (i64, i64),
         field: impl Fn() -> String,
     ) -> Result<(), GateRefusal> {
-        let mut gate = self.gate.lock().unwrap_or_else(|p| p.into_inner());
-        gate.admit(kind, t_ns, wall_ns(), window_ns, max_future_ns, field)
+        self.gate()
+            .admit(kind, t_ns, wall_ns, limits.0, limits.1, field)
+    }
+
+    /// The time gate, locked (to run a whole batch through it with one lock).
+    pub fn gate(&self) -> std::sync::MutexGuard<'_, TimeGate> {
+        self.gate.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     /// The configured camera, if any.
@@ -209,7 +215,20 @@ impl VehicleShared {
 
     /// The latest pose, if any.
     pub fn pose(&self) -> Option<pb::PoseEstimate> {
-        self.latest_pose.borrow().as_ref()?.last()
+        self.latest_pose_batch()?.last()
+    }
+
+    /// The latest pose batch, if any.
+    pub fn latest_pose_batch(&self) -> Option<Arc<crate::hub::PoseBatch>> {
+        self.latest_pose
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
+    }
+
+    /// Records the latest pose batch.
+    pub fn set_latest_pose(&self, batch: Arc<crate::hub::PoseBatch>) {
+        *self.latest_pose.lock().unwrap_or_else(|p| p.into_inner()) = Some(batch);
     }
 
     /// The latest health report, if any.
