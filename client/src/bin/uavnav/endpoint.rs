@@ -12,10 +12,25 @@ pub const DEFAULT_URL: &str = "grpc://127.0.0.1:50051";
 
 /// Runs an async command on a fresh multi-threaded runtime.
 pub fn block_on<F: Future<Output = CliResult>>(f: F) -> CliResult {
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()
-        .map_err(|e| CliError::runtime(anyhow::anyhow!("cannot start the async runtime: {e}")))?;
+    block_on_threads(0, f)
+}
+
+/// Like [`block_on`] on `threads` worker threads: 0 = one per core, 1 = a single-threaded
+/// runtime (no cross-thread wake-ups).
+pub fn block_on_threads<F: Future<Output = CliResult>>(threads: usize, f: F) -> CliResult {
+    let rt = match threads {
+        0 => tokio::runtime::Builder::new_multi_thread()
+            .enable_all()
+            .build(),
+        1 => tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build(),
+        n => tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(n)
+            .enable_all()
+            .build(),
+    }
+    .map_err(|e| CliError::runtime(anyhow::anyhow!("cannot start the async runtime: {e}")))?;
     rt.block_on(f)
 }
 

@@ -22,7 +22,7 @@ use uavnav_client::schedule::{self, ScheduleParams};
 use uavnav_client::{Client, pb};
 
 use crate::common::{CliError, CliResult, progress};
-use crate::endpoint::{DEFAULT_URL, block_on, client_err, connect};
+use crate::endpoint::{DEFAULT_URL, block_on_threads, client_err, connect};
 
 /// The built-in flight (the repository's smoke scenario).
 const SMOKE_SCENARIO: &str = include_str!("../../../../scenarios/smoke.toml");
@@ -65,6 +65,11 @@ pub struct Args {
     /// Parallel ingest streams.
     #[arg(long, default_value_t = 4)]
     pub streams: usize,
+    /// Async worker threads of the generator: 1 (the default) runs it on one thread, with no
+    /// cross-thread wake-ups, taking the least CPU from a service on the same machine; 0 = one
+    /// per core.
+    #[arg(long, default_value_t = 1)]
+    pub threads: usize,
     /// Keep one pose in N per vehicle for the latency measurement.
     #[arg(long, default_value_t = 1)]
     pub decimation: u32,
@@ -228,7 +233,7 @@ pub fn run(args: Args) -> CliResult {
         max_p99_send_lag: Duration::from_secs_f64(args.max_send_lag_ms / 1e3),
         max_error_rate: args.max_error_rate,
     };
-    block_on(async move {
+    block_on_threads(args.threads, async move {
         let client = connect(&args.to).await?;
         let target = client.endpoint().to_string();
         let tag = run_tag();
