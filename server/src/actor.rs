@@ -224,7 +224,8 @@ struct Actor {
     buffer: ReorderBuffer<Stamped>,
     /// The outstanding vision job's result.
     pending: Option<oneshot::Receiver<VisionResult>>,
-    /// Poses made since the last publication (published once per handled event, as one batch).
+    /// Poses made since the last publication (published as one batch per wake-up: the message
+    /// that woke the actor and those already queued behind it).
     outbox: Vec<pb::PoseEstimate>,
     /// (t_ns of the first sample, arrival, arrival wall ns) per fused IMU arrival, oldest first.
     ingest_times: VecDeque<(i64, Instant, i64)>,
