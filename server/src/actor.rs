@@ -205,6 +205,7 @@ pub fn spawn(
         engine,
         pending: None,
         outbox: Vec::new(),
+        stamped: 0,
         ingest_times: VecDeque::new(),
         last_input: Instant::now(),
         ctx,
@@ -227,6 +228,8 @@ struct Actor {
     /// Poses made since the last publication (published as one batch per wake-up: the message
     /// that woke the actor and those already queued behind it).
     outbox: Vec<pb::PoseEstimate>,
+    /// How many of the outbox's poses are stamped (the rest are, when published).
+    stamped: usize,
     /// (t_ns of the first sample, arrival, arrival wall ns) per fused IMU arrival, oldest first.
     ingest_times: VecDeque<(i64, Instant, i64)>,
     last_input: Instant,
@@ -359,6 +362,8 @@ impl Actor {
                 self.buffer.clear();
                 self.engine.reset();
                 self.pending = None;
+                // The poses made before the reset keep the arrivals they came from.
+                self.stamp();
                 self.ingest_times.clear();
                 if let Some(r) = reply {
                     let _ = r.send(());
@@ -419,15 +424,11 @@ impl Actor {
             }
             Input::Gnss(_) => {}
         }
-        let from = self.outbox.len();
         match self
             .engine
             .push_into(s.input.into_event(), &mut self.outbox)
         {
-            Ok(work) => {
-                self.stamp(from);
-                self.start(work);
-            }
+            Ok(work) => self.start(work),
             Err(e) => {
                 VehicleStats::add(&self.shared.stats.dropped, 1);
                 self.ctx.metrics.engine_errors.inc();
@@ -438,9 +439,7 @@ impl Actor {
 
     /// Queues a step's poses for publication and sends its vision job to the pool.
     fn apply(&mut self, step: EngineStep) {
-        let from = self.outbox.len();
         self.outbox.extend(step.poses);
-        self.stamp(from);
         self.start(step.work);
     }
 
@@ -490,14 +489,14 @@ impl Actor {
         }
     }
 
-    /// Stamps the outbox's poses from index `from` on with the arrival time of the IMU sample each
-    /// was made from and records their latency.
-    fn stamp(&mut self, from: usize) {
-        if from >= self.outbox.len() {
+    /// Stamps the outbox's poses not yet stamped with the arrival time of the IMU sample each was
+    /// made from and records their latency, up to now (one clock read for all of them).
+    fn stamp(&mut self) {
+        if self.stamped >= self.outbox.len() {
             return;
         }
         let now = Instant::now();
-        for i in from..self.outbox.len() {
+        for i in self.stamped..self.outbox.len() {
             if let Some((at, wall_ns)) = self.arrival_of(self.outbox[i].t_ns) {
                 self.outbox[i].ingest_wall_ns = wall_ns;
                 let latency_s = now.saturating_duration_since(at).as_secs_f64();
@@ -505,6 +504,7 @@ impl Actor {
                 self.window.latency(latency_s);
             }
         }
+        self.stamped = self.outbox.len();
     }
 
     /// Publishes the outbox as one batch: the vehicle's latest pose and the fan-out.
@@ -512,6 +512,8 @@ impl Actor {
         if self.outbox.is_empty() {
             return;
         }
+        self.stamp();
+        self.stamped = 0;
         let n = self.outbox.len();
         let batch = Arc::new(PoseBatch {
             vehicle_id: Arc::clone(&self.shared.id),

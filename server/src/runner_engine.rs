@@ -54,24 +54,27 @@ pub struct RunnerEngine {
 }
 
 impl RunnerEngine {
-    fn step(&mut self, step: Step) -> EngineStep {
+    /// Appends `step`'s poses to `out` as wire poses and hands back its vision work.
+    fn emit(&mut self, step: &mut Step, out: &mut Vec<pb::PoseEstimate>) -> Option<VisionWork> {
         if let Some(p) = step.poses.last() {
             self.last_t_ns = p.t_ns;
         }
-        EngineStep {
-            poses: step.poses.iter().map(pose_to_wire).collect(),
-            work: step.job.map(vision_work),
-        }
+        out.extend(step.poses.iter().map(pose_to_wire));
+        step.job.take().map(vision_work)
+    }
+
+    fn step(&mut self, mut step: Step) -> EngineStep {
+        let mut poses = Vec::with_capacity(step.poses.len());
+        let work = self.emit(&mut step, &mut poses);
+        EngineStep { poses, work }
     }
 }
 
 impl Engine for RunnerEngine {
     fn push(&mut self, event: SensorEvent) -> Result<EngineStep, EngineError> {
-        let step = self
-            .runner
-            .push(event)
-            .map_err(|e| EngineError(e.to_string()))?;
-        Ok(self.step(step))
+        let mut poses = Vec::new();
+        let work = self.push_into(event, &mut poses)?;
+        Ok(EngineStep { poses, work })
     }
 
     fn push_into(
@@ -79,14 +82,13 @@ impl Engine for RunnerEngine {
         event: SensorEvent,
         poses: &mut Vec<pb::PoseEstimate>,
     ) -> Result<Option<VisionWork>, EngineError> {
-        self.scratch.poses.clear();
-        let r = self.runner.push_into(event, &mut self.scratch);
-        if let Some(p) = self.scratch.poses.last() {
-            self.last_t_ns = p.t_ns;
-        }
-        poses.extend(self.scratch.poses.iter().map(pose_to_wire));
+        let mut scratch = std::mem::take(&mut self.scratch);
+        scratch.poses.clear();
+        let r = self.runner.push_into(event, &mut scratch);
+        let work = self.emit(&mut scratch, poses);
+        self.scratch = scratch;
         r.map_err(|e| EngineError(e.to_string()))?;
-        Ok(self.scratch.job.take().map(vision_work))
+        Ok(work)
     }
 
     fn finish_frame(&mut self, done: VisionResult) -> EngineStep {
