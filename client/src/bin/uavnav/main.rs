@@ -70,6 +70,11 @@ enum Command {
     Loadtest(loadtest::Args),
 }
 
+/// mimalloc, as in `uavnavd`: the load generator and the in-process service of `demo` allocate a
+/// few small buffers per message.
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 fn main() -> ExitCode {
     run()
 }
