@@ -6,7 +6,7 @@
 
 use nalgebra::{UnitQuaternion, Vector3};
 use uavnav_core::{Lla, LocalFrame};
-use uavnav_estimator::health::{Health, Mode};
+use uavnav_estimator::health::{Mode, PoseHealth};
 use uavnav_estimator::output::PoseOutput;
 
 use crate::pb;
@@ -39,9 +39,9 @@ pub fn to_output(p: &pb::PoseEstimate, frame: Option<&LocalFrame>) -> Option<Pos
     let nav_from_body =
         UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z));
     let pos_ned_m = frame.map_or_else(Vector3::zeros, |f| f.lla_to_ned(&lla));
-    let health = Health {
+    let health = PoseHealth {
         mode: mode(p.mode),
-        ..Health::default()
+        ..PoseHealth::default()
     };
     Some(PoseOutput {
         t_ns: p.t_ns,

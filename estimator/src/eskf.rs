@@ -11,7 +11,7 @@ use crate::aid_sources::gnss_pos::{GnssMeas, GnssPosSource, white_noise};
 use crate::aid_sources::gnss_vel::GnssVelSource;
 use crate::aid_sources::vision::{VisionSource, VisionUse};
 use crate::buffer::{DelayBuffer, Event};
-use crate::health::{Health, Mode};
+use crate::health::{Health, Mode, PoseHealth};
 use crate::init::{Initialiser, yaw_from_course};
 use crate::output::{AidingFlags, PoseOutput, euler_sigma};
 use crate::output_predictor::{OutputPredictor, mean_of};
@@ -512,6 +512,21 @@ impl Eskf {
         }
     }
 
+    /// [`Eskf::health`]'s summary, built without the full snapshot (this runs for every output).
+    fn pose_health(&self) -> PoseHealth {
+        PoseHealth {
+            mode: self.mode(),
+            gnss_pos: (&self.gnss_pos.diag).into(),
+            gnss_vel: (&self.gnss_vel.diag).into(),
+            vision_rot: (&self.vision.rot).into(),
+            vision_trans: (&self.vision.trans).into(),
+            inputs_rejected: 0,
+            late_dropped: self.late_dropped,
+            vision_no_clone: self.vision.no_clone,
+            gnss_resets: self.gnss_pos.resets + self.gnss_vel.resets,
+        }
+    }
+
     fn output(&mut self) -> Option<PoseOutput> {
         let frame = *self.frame.as_ref()?;
         let p_out = self.out.x.as_ref()?.p;
@@ -544,7 +559,7 @@ impl Eskf {
             sigma_att_rad: euler_sigma(&o.q, &cov_th),
             gyro_bias_radps: x.bg,
             accel_bias_mps2: x.ba,
-            health: self.health(),
+            health: self.pose_health(),
             aiding: AidingFlags {
                 gnss_pos: self.gnss_pos.diag.active(x.t_ns, to),
                 gnss_vel: self.gnss_vel.diag.active(x.t_ns, to),

@@ -1,5 +1,6 @@
-//! Filter health, returned with every output (never logged): mode, per-source innovation
-//! diagnostics with test ratios, rejection counts and the covariance diagonal.
+//! Filter health: [`Health`], the full snapshot (mode, per-source innovation diagnostics with test
+//! ratios, rejection counts, the covariance diagonal) that `Estimator::health` returns, and
+//! [`PoseHealth`], its summary carried by every output (never logged).
 
 use crate::aid_sources::InnovDiag;
 
@@ -32,7 +33,7 @@ impl Mode {
     }
 }
 
-/// Health of the estimator at one output.
+/// Health of the estimator: the full snapshot.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Health {
     /// Current mode.
@@ -71,6 +72,68 @@ impl Default for Health {
             vision_no_clone: 0,
             gnss_resets: 0,
             cov_diag: [0.0; crate::state::N],
+        }
+    }
+}
+
+/// One aiding source at one output: what [`InnovDiag`] counts, without the innovation vectors.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SourceSummary {
+    /// Latest test ratio (normalised innovation squared over the gate; > 1 = rejected).
+    pub test_ratio: f64,
+    /// Measurements fused so far.
+    pub fused: u64,
+    /// Measurements rejected by the gate so far.
+    pub rejected: u64,
+}
+
+impl From<&InnovDiag> for SourceSummary {
+    fn from(d: &InnovDiag) -> Self {
+        Self {
+            test_ratio: d.test_ratio,
+            fused: d.fused,
+            rejected: d.rejected,
+        }
+    }
+}
+
+/// Health at one output: the mode, the counters and each source's summary. Every IMU sample gives
+/// an output, so this stays small (about a fifth of [`Health`]: no innovation vectors, no covariance
+/// diagonal); the full snapshot is `Estimator::health`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PoseHealth {
+    /// Current mode.
+    pub mode: Mode,
+    /// GNSS position.
+    pub gnss_pos: SourceSummary,
+    /// GNSS velocity.
+    pub gnss_vel: SourceSummary,
+    /// Vision relative rotation (paper profile: the pseudo-attitude).
+    pub vision_rot: SourceSummary,
+    /// Vision translation (direction / metric; paper: eq. 35 velocity).
+    pub vision_trans: SourceSummary,
+    /// Inputs refused by validation (NaN, time going backwards, …).
+    pub inputs_rejected: u64,
+    /// Measurements that arrived behind the fusion horizon and were dropped.
+    pub late_dropped: u64,
+    /// Vision measurements dropped for lack of a clone at their frame-0 time.
+    pub vision_no_clone: u64,
+    /// GNSS inflate-and-fuse resets.
+    pub gnss_resets: u32,
+}
+
+impl From<&Health> for PoseHealth {
+    fn from(h: &Health) -> Self {
+        Self {
+            mode: h.mode,
+            gnss_pos: (&h.gnss_pos).into(),
+            gnss_vel: (&h.gnss_vel).into(),
+            vision_rot: (&h.vision_rot).into(),
+            vision_trans: (&h.vision_trans).into(),
+            inputs_rejected: h.inputs_rejected,
+            late_dropped: h.late_dropped,
+            vision_no_clone: h.vision_no_clone,
+            gnss_resets: h.gnss_resets,
         }
     }
 }

@@ -18,7 +18,7 @@
 //! | [`output_predictor`] | a pose for every IMU sample from the delayed filter |
 //! | [`init`] | alignment without operator input |
 //! | [`motion_prior`] | the prior handed to the vision front end |
-//! | [`health`] | [`Health`] and [`Mode`], returned with every output |
+//! | [`health`] | [`Health`] (full snapshot), [`PoseHealth`] (with every output) and [`Mode`] |
 //! | [`output`] | [`PoseOutput`], [`AidingFlags`], Euler σ and eq. (31)'s `J` |
 //! | [`paper`] | the paper's GPS-IMU, VIDEO-IMU(1) and VIDEO-IMU(2) filters |
 //! | [`format`] | CSV and TUM line formatters for the CLI |
@@ -42,7 +42,7 @@ pub mod state;
 pub mod validate;
 
 pub use estimator::Estimator;
-pub use health::{Health, Mode};
+pub use health::{Health, Mode, PoseHealth, SourceSummary};
 pub use output::{AidingFlags, PoseOutput};
 pub use params::EstimatorParams;
 pub use validate::InputError;

@@ -3,7 +3,7 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use uavnav_core::Lla;
 
-use crate::health::Health;
+use crate::health::PoseHealth;
 
 /// Which aiding sources contributed recently (within the aid timeout).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -43,8 +43,8 @@ pub struct PoseOutput {
     pub gyro_bias_radps: Vector3<f64>,
     /// Estimated accelerometer bias, m/s² (zero for the paper profile).
     pub accel_bias_mps2: Vector3<f64>,
-    /// Filter health.
-    pub health: Health,
+    /// Filter health at this output (the full snapshot: `Estimator::health`).
+    pub health: PoseHealth,
     /// Recently fused sources.
     pub aiding: AidingFlags,
 }

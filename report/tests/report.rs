@@ -8,7 +8,7 @@ use std::path::Path;
 use nalgebra::Vector3;
 use uavnav_core::rotation::{euler_zyx, from_euler_zyx};
 use uavnav_core::{Lla, TruthSample};
-use uavnav_estimator::{Health, Mode, PoseOutput};
+use uavnav_estimator::{Mode, PoseHealth, PoseOutput};
 use uavnav_report::{DEFAULT_MIN_GAP_NS, ReportError, Run, gnss_outages, write_report};
 
 const S: i64 = 1_000_000_000;
@@ -62,13 +62,13 @@ fn outputs(truth: &[TruthSample], att_err: Vector3<f64>, drift_end_m: f64) -> Ve
             } else {
                 0.0
             };
-            let health = Health {
+            let health = PoseHealth {
                 mode: if t_s < 1.0 {
                     Mode::Initialising
                 } else {
                     Mode::Nominal
                 },
-                ..Health::default()
+                ..PoseHealth::default()
             };
             PoseOutput {
                 t_ns: tr.t_ns,

@@ -11,7 +11,7 @@
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use hdrhistogram::Histogram;
 use tokio::sync::mpsc;
@@ -187,14 +187,18 @@ async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleCo
     let watcher = tokio::spawn(async move {
         loop {
             match poses_rx.recv().await {
-                Ok(p) => {
-                    p2.fetch_add(1, Ordering::Relaxed);
-                    let lat_us = (uavnavd::vehicle::wall_ns() - p.ingest_wall_ns) / 1000;
+                Ok(batch) => {
+                    p2.fetch_add(batch.poses.len() as u64, Ordering::Relaxed);
+                    let now_ns = uavnavd::vehicle::wall_ns();
                     if let Ok(mut h) = h2.lock() {
-                        let _ = h.record(lat_us.max(1) as u64);
+                        for p in &batch.poses {
+                            let lat_us = (now_ns - p.ingest_wall_ns) / 1000;
+                            let _ = h.record(lat_us.max(1) as u64);
+                        }
                     }
                 }
                 Err(tokio::sync::broadcast::error::RecvError::Lagged(k)) => {
+                    // k batches skipped, counted as one pose each (a lower bound).
                     p2.fetch_add(k, Ordering::Relaxed);
                 }
                 Err(_) => break,

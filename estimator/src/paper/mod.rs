@@ -566,7 +566,7 @@ impl PaperFilter {
             sigma_att_rad: sd(&att.p_euler()),
             gyro_bias_radps: Vector3::zeros(),
             accel_bias_mps2: Vector3::zeros(),
-            health: h,
+            health: (&h).into(),
             aiding: AidingFlags {
                 gnss_pos: h.gnss_pos.active(t_ns, to),
                 gnss_vel: h.gnss_vel.active(t_ns, to),
