@@ -14,12 +14,11 @@ use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, oneshot};
 use tracing::{Span, debug, info_span, warn};
 use uavnav_core::{CameraFrame, GnssFix, ImuSample, SensorEvent, VehicleConfig};
-use uavnav_proto::v1 as pb;
 
 use crate::config::VehiclesConfig;
 use crate::engine::{Engine, EngineStep, SharedFactory, VisionResult, VisionWork};
 use crate::health::HealthWindow;
-use crate::hub::{Hub, PoseBatch};
+use crate::hub::{Hub, Pose, PoseBatch};
 use crate::metrics::Metrics;
 use crate::reorder::{Refused, ReorderBuffer};
 use crate::vehicle::{InputKind, VehicleShared, VehicleStats};
@@ -227,7 +226,7 @@ struct Actor {
     pending: Option<oneshot::Receiver<VisionResult>>,
     /// Poses made since the last publication (published as one batch per wake-up: the message
     /// that woke the actor and those already queued behind it).
-    outbox: Vec<pb::PoseEstimate>,
+    outbox: Vec<Pose>,
     /// How many of the outbox's poses are stamped (the rest are, when published).
     stamped: usize,
     /// (t_ns of the first sample, arrival, arrival wall ns) per fused IMU arrival, oldest first.

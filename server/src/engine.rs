@@ -10,6 +10,8 @@ use std::sync::Arc;
 use uavnav_core::{SensorEvent, VehicleConfig};
 use uavnav_proto::v1 as pb;
 
+use crate::hub::Pose;
+
 /// An error reported by an engine for one input; the actor counts it and goes on.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{0}")]
@@ -40,12 +42,12 @@ pub type VisionResult = Box<dyn Any + Send>;
 /// CPU work for one camera frame, run on the vision pool.
 pub type VisionWork = Box<dyn FnOnce() -> VisionResult + Send>;
 
-/// What one call produced: poses (wire messages without `vehicle_id` / `ingest_wall_ns`, which the
-/// actor fills in) and possibly a vision job to run on the pool.
+/// What one call produced: poses (`ingest_wall_ns` unset: the actor fills it in) and possibly a
+/// vision job to run on the pool.
 #[derive(Default)]
 pub struct EngineStep {
     /// Poses in time order.
-    pub poses: Vec<pb::PoseEstimate>,
+    pub poses: Vec<Pose>,
     /// Vision work to run; its result goes back through [`Engine::finish_frame`].
     pub work: Option<VisionWork>,
 }
@@ -69,7 +71,7 @@ pub trait Engine: Send + 'static {
     fn push_into(
         &mut self,
         event: SensorEvent,
-        poses: &mut Vec<pb::PoseEstimate>,
+        poses: &mut Vec<Pose>,
     ) -> Result<Option<VisionWork>, EngineError> {
         let step = self.push(event)?;
         poses.extend(step.poses);

@@ -78,11 +78,10 @@ impl LiveTap {
     }
 
     /// Shows one pose estimate (a complete wire message, `vehicle_id` set).
-    pub fn pose(&self, mut p: pb::PoseEstimate) {
-        let vehicle_id: Arc<str> = std::mem::take(&mut p.vehicle_id).into();
+    pub fn pose(&self, p: pb::PoseEstimate) {
         self.poses(Arc::new(crate::hub::PoseBatch {
-            vehicle_id,
-            poses: vec![p],
+            vehicle_id: p.vehicle_id.as_str().into(),
+            poses: vec![crate::hub::Pose::from_wire(&p)],
         }));
     }
 
@@ -190,7 +189,7 @@ async fn run(mut scene: Scene, mut rx: mpsc::Receiver<LiveMsg>) -> Scene {
         match m {
             LiveMsg::Poses(b) => {
                 for p in &b.poses {
-                    scene.pose(&b.vehicle_id, p);
+                    scene.pose(&b.vehicle_id, &p.to_wire(""));
                 }
             }
             LiveMsg::Gnss(id, f) => scene.gnss(&id, &f),

@@ -5,6 +5,7 @@ use uavnav_core::{SensorEvent, VehicleConfig};
 use uavnav_proto::v1 as pb;
 use uavnav_runner::{Health, Mode, PoseOutput, RunnerParams, Step, VehicleRunner, VisionDone};
 
+use crate::hub::Pose;
 use crate::engine::{
     Engine, EngineError, EngineFactory, EngineHealth, EngineStep, VisionResult, VisionWork,
 };
@@ -55,11 +56,11 @@ pub struct RunnerEngine {
 
 impl RunnerEngine {
     /// Appends `step`'s poses to `out` as wire poses and hands back its vision work.
-    fn emit(&mut self, step: &mut Step, out: &mut Vec<pb::PoseEstimate>) -> Option<VisionWork> {
+    fn emit(&mut self, step: &mut Step, out: &mut Vec<Pose>) -> Option<VisionWork> {
         if let Some(p) = step.poses.last() {
             self.last_t_ns = p.t_ns;
         }
-        out.extend(step.poses.iter().map(pose_to_wire));
+        out.extend(step.poses.iter().map(pose_of));
         step.job.take().map(vision_work)
     }
 
@@ -80,7 +81,7 @@ impl Engine for RunnerEngine {
     fn push_into(
         &mut self,
         event: SensorEvent,
-        poses: &mut Vec<pb::PoseEstimate>,
+        poses: &mut Vec<Pose>,
     ) -> Result<Option<VisionWork>, EngineError> {
         let mut scratch = std::mem::take(&mut self.scratch);
         scratch.poses.clear();
@@ -166,20 +167,20 @@ pub fn mode_to_wire(m: Mode) -> pb::EstimatorMode {
     }
 }
 
-/// Estimator pose → wire (without `vehicle_id` and `ingest_wall_ns`).
-pub fn pose_to_wire(p: &PoseOutput) -> pb::PoseEstimate {
-    let mut aiding = Vec::new();
+/// Estimator pose → the service's pose (`ingest_wall_ns` unset).
+pub fn pose_of(p: &PoseOutput) -> Pose {
+    let bit = Pose::aiding_bit;
+    let mut aiding = 0;
     if p.aiding.gnss_pos {
-        aiding.push(pb::AidingSource::GnssPosition as i32);
+        aiding |= bit(pb::AidingSource::GnssPosition);
     }
     if p.aiding.gnss_vel {
-        aiding.push(pb::AidingSource::GnssVelocity as i32);
+        aiding |= bit(pb::AidingSource::GnssVelocity);
     }
     if p.aiding.vision_rot || p.aiding.vision_trans {
-        aiding.push(pb::AidingSource::Vision as i32);
+        aiding |= bit(pb::AidingSource::Vision);
     }
-    pb::PoseEstimate {
-        vehicle_id: String::new(),
+    Pose {
         t_ns: p.t_ns,
         position: Some((&p.lla).into()),
         vel_ned_mps: Some((&p.vel_ned_mps).into()),
@@ -190,9 +191,13 @@ pub fn pose_to_wire(p: &PoseOutput) -> pb::PoseEstimate {
         sigma_pos_ned_m: Some((&p.sigma_pos_ned_m).into()),
         sigma_vel_ned_mps: Some((&p.sigma_vel_mps).into()),
         sigma_att_rad: Some((&p.sigma_att_rad).into()),
-        covariance_9x9: Vec::new(),
-        aiding_sources: aiding,
-        mode: mode_to_wire(p.health.mode) as i32,
+        aiding,
+        mode: mode_to_wire(p.health.mode),
         ingest_wall_ns: 0,
     }
+}
+
+/// Estimator pose → wire (without `vehicle_id` and `ingest_wall_ns`).
+pub fn pose_to_wire(p: &PoseOutput) -> pb::PoseEstimate {
+    pose_of(p).to_wire("")
 }

@@ -34,14 +34,14 @@ impl Engine for EchoEngine {
                     altitude_m: f.alt_m,
                 });
                 let mode = self.mode();
-                step.poses.push(pb::PoseEstimate {
+                step.poses.push(uavnavd::hub::Pose {
                     t_ns: s.t_ns,
                     position,
                     nav_from_body: Some(pb::Quaternion {
                         w: 1.0,
                         ..Default::default()
                     }),
-                    mode: mode as i32,
+                    mode,
                     ..Default::default()
                 });
             }
