@@ -199,11 +199,12 @@ impl Watched for PoseBatch {
 }
 
 /// Forwards the selected, decimated messages of a broadcast channel to a watch stream until the
-/// client leaves or the service stops.
+/// client leaves or the service stops. What it skips when behind is counted in `lagged`.
 fn watch_stream<T: Watched>(
     mut rx: broadcast::Receiver<Arc<T>>,
     sel: Selector,
     mut stopping: watch::Receiver<bool>,
+    lagged: prometheus_client::metrics::counter::Counter,
 ) -> BoxStream<T::Out> {
     let (tx, out) = mpsc::channel(WATCH_QUEUE);
     tokio::spawn(async move {
@@ -229,7 +230,9 @@ fn watch_stream<T: Watched>(
                         }
                     }
                     // A slow watcher skips what it missed rather than slowing estimation down.
-                    Err(broadcast::error::RecvError::Lagged(_)) => {}
+                    Err(broadcast::error::RecvError::Lagged(n)) => {
+                        lagged.inc_by(n);
+                    }
                     Err(broadcast::error::RecvError::Closed) => return,
                 }
                 next = match rx.try_recv() {
@@ -339,8 +342,9 @@ impl UavNav for UavNavService {
         request: Request<pb::WatchRequest>,
     ) -> Result<Response<Self::WatchPosesStream>, Status> {
         let sel = Selector::from_request(request.get_ref())?;
-        let rx = self.ingestor.registry().ctx().hub.poses.subscribe();
-        Ok(Response::new(watch_stream(rx, sel, self.stopping())))
+        let ctx = self.ingestor.registry().ctx();
+        let (rx, lagged) = (ctx.hub.poses.subscribe(), ctx.metrics.watch_lagged.clone());
+        Ok(Response::new(watch_stream(rx, sel, self.stopping(), lagged)))
     }
 
     async fn watch_health(
@@ -348,8 +352,9 @@ impl UavNav for UavNavService {
         request: Request<pb::WatchRequest>,
     ) -> Result<Response<Self::WatchHealthStream>, Status> {
         let sel = Selector::from_request(request.get_ref())?;
-        let rx = self.ingestor.registry().ctx().hub.health.subscribe();
-        Ok(Response::new(watch_stream(rx, sel, self.stopping())))
+        let ctx = self.ingestor.registry().ctx();
+        let (rx, lagged) = (ctx.hub.health.subscribe(), ctx.metrics.watch_lagged.clone());
+        Ok(Response::new(watch_stream(rx, sel, self.stopping(), lagged)))
     }
 
     async fn get_pose(
@@ -464,5 +469,46 @@ mod tests {
             assert_eq!(kept, expected, "decimation {d}");
         }
         assert_eq!(filter(2).keep("b1", 8).count(), 0, "unselected vehicle");
+    }
+
+    /// A watcher that does not read falls behind the broadcast ring: it skips the oldest batches,
+    /// counts each skipped one, and delivers every batch it did not skip.
+    #[tokio::test]
+    async fn a_lagging_watch_counts_what_it_skipped() {
+        use futures::StreamExt;
+        let ring = 8;
+        let (btx, rx) = broadcast::channel(ring);
+        let (_stop_tx, stopping) = watch::channel(false);
+        let lagged = prometheus_client::metrics::counter::Counter::default();
+        let sel = Selector {
+            ids: Vec::new(),
+            prefix: String::new(),
+            all: true,
+            decimation: 1,
+        };
+        let mut out = watch_stream(rx, sel, stopping, lagged.clone());
+        // The task forwards WATCH_QUEUE poses, then waits for the unread stream; the ring
+        // overflows behind it.
+        let total = (WATCH_QUEUE + 4 * ring) as i64;
+        for t_ns in 0..total {
+            let batch = PoseBatch {
+                vehicle_id: "uav-1".into(),
+                poses: vec![crate::hub::Pose {
+                    t_ns,
+                    ..Default::default()
+                }],
+            };
+            let _ = btx.send(Arc::new(batch));
+            tokio::task::yield_now().await;
+        }
+        drop(btx);
+        let mut got = Vec::new();
+        while let Some(Ok(p)) = out.next().await {
+            got.push(p.t_ns);
+        }
+        assert!(lagged.get() > 0, "the watcher lagged");
+        assert_eq!(got.len() as u64 + lagged.get(), total as u64, "every batch sent or counted");
+        assert!(got.windows(2).all(|w| w[0] < w[1]), "in order");
+        assert_eq!(got.last(), Some(&(total - 1)), "the newest batch is delivered");
     }
 }

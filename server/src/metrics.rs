@@ -121,6 +121,9 @@ pub struct Metrics {
     pub engine_errors: Counter,
     /// Outputs the Zenoh publisher could not keep up with (skipped).
     pub zenoh_output_lagged: Counter,
+    /// Output batches (poses) and reports (health) gRPC watch streams skipped because they were
+    /// behind.
+    pub watch_lagged: Counter,
     /// Samples received on the Zenoh input key expressions (before decoding).
     pub zenoh_samples: Counter,
     /// Messages the Foxglove live view skipped because it was behind.
@@ -144,6 +147,7 @@ impl Metrics {
         let reorder_dropped = Counter::default();
         let engine_errors = Counter::default();
         let zenoh_output_lagged = Counter::default();
+        let watch_lagged = Counter::default();
         let zenoh_samples = Counter::default();
         let foxglove_dropped = Counter::default();
         registry.register(
@@ -204,6 +208,11 @@ impl Metrics {
             zenoh_output_lagged.clone(),
         );
         registry.register(
+            "watch_lagged",
+            "Pose batches and health reports gRPC watch streams skipped because they were behind",
+            watch_lagged.clone(),
+        );
+        registry.register(
             "zenoh_samples",
             "Samples received on the Zenoh input key expressions, before decoding",
             zenoh_samples.clone(),
@@ -228,6 +237,7 @@ impl Metrics {
             reorder_dropped,
             engine_errors,
             zenoh_output_lagged,
+            watch_lagged,
             zenoh_samples,
             foxglove_dropped,
         }
