@@ -145,7 +145,7 @@ impl Estimator {
         }
     }
 
-    /// Current health (also attached to every output).
+    /// Current health, the full snapshot (every output carries its summary, `PoseHealth`).
     pub fn health(&self) -> Health {
         let mut h = match &self.profile {
             Profile::Eskf(e) => e.health(),
