@@ -44,6 +44,17 @@ impl UavNavService {
     fn stopping(&self) -> watch::Receiver<bool> {
         self.ingestor.registry().ctx().hub.stopping.clone()
     }
+
+    /// A watch stream over `rx` that ends with the service and counts its skips in
+    /// `watch_lagged`.
+    fn watch<T: Watched>(
+        &self,
+        rx: broadcast::Receiver<Arc<T>>,
+        sel: Selector,
+    ) -> BoxStream<T::Out> {
+        let lagged = self.ingestor.registry().ctx().metrics.watch_lagged.clone();
+        watch_stream(rx, sel, self.stopping(), lagged)
+    }
 }
 
 type BoxStream<T> = Pin<Box<dyn Stream<Item = Result<T, Status>> + Send + 'static>>;
@@ -342,9 +353,8 @@ impl UavNav for UavNavService {
         request: Request<pb::WatchRequest>,
     ) -> Result<Response<Self::WatchPosesStream>, Status> {
         let sel = Selector::from_request(request.get_ref())?;
-        let ctx = self.ingestor.registry().ctx();
-        let (rx, lagged) = (ctx.hub.poses.subscribe(), ctx.metrics.watch_lagged.clone());
-        Ok(Response::new(watch_stream(rx, sel, self.stopping(), lagged)))
+        let rx = self.ingestor.registry().ctx().hub.poses.subscribe();
+        Ok(Response::new(self.watch(rx, sel)))
     }
 
     async fn watch_health(
@@ -352,9 +362,8 @@ impl UavNav for UavNavService {
         request: Request<pb::WatchRequest>,
     ) -> Result<Response<Self::WatchHealthStream>, Status> {
         let sel = Selector::from_request(request.get_ref())?;
-        let ctx = self.ingestor.registry().ctx();
-        let (rx, lagged) = (ctx.hub.health.subscribe(), ctx.metrics.watch_lagged.clone());
-        Ok(Response::new(watch_stream(rx, sel, self.stopping(), lagged)))
+        let rx = self.ingestor.registry().ctx().hub.health.subscribe();
+        Ok(Response::new(self.watch(rx, sel)))
     }
 
     async fn get_pose(
@@ -507,8 +516,16 @@ mod tests {
             got.push(p.t_ns);
         }
         assert!(lagged.get() > 0, "the watcher lagged");
-        assert_eq!(got.len() as u64 + lagged.get(), total as u64, "every batch sent or counted");
+        assert_eq!(
+            got.len() as u64 + lagged.get(),
+            total as u64,
+            "every batch sent or counted"
+        );
         assert!(got.windows(2).all(|w| w[0] < w[1]), "in order");
-        assert_eq!(got.last(), Some(&(total - 1)), "the newest batch is delivered");
+        assert_eq!(
+            got.last(),
+            Some(&(total - 1)),
+            "the newest batch is delivered"
+        );
     }
 }

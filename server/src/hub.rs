@@ -224,7 +224,13 @@ mod tests {
 
     #[test]
     fn wire_round_trip_keeps_every_field() {
-        let v = |x| Some(pb::Vector3 { x, y: -x, z: 2.0 * x });
+        let v = |x| {
+            Some(pb::Vector3 {
+                x,
+                y: -x,
+                z: 2.0 * x,
+            })
+        };
         let wire = pb::PoseEstimate {
             vehicle_id: "uav-1".into(),
             t_ns: 42,

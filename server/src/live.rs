@@ -189,7 +189,7 @@ async fn run(mut scene: Scene, mut rx: mpsc::Receiver<LiveMsg>) -> Scene {
         match m {
             LiveMsg::Poses(b) => {
                 for p in &b.poses {
-                    scene.pose(&b.vehicle_id, &p.to_wire(""));
+                    scene.pose(&b.vehicle_id, p);
                 }
             }
             LiveMsg::Gnss(id, f) => scene.gnss(&id, &f),
@@ -246,7 +246,7 @@ impl Scene {
             .unwrap_or_else(|| unreachable!("inserted above"))
     }
 
-    fn pose(&mut self, id: &str, p: &pb::PoseEstimate) {
+    fn pose(&mut self, id: &str, p: &crate::hub::Pose) {
         // An estimate without a valid position or attitude (initialising) has nothing to draw.
         let Some(lla) = p.position.as_ref().and_then(|g| Lla::try_from(g).ok()) else {
             return;
@@ -263,7 +263,7 @@ impl Scene {
         if !due && !v.pose.has_sinks() {
             return;
         }
-        let Ok(pose) = foxglove_conv::pose_in_frame(p, &frame) else {
+        let Ok(pose) = foxglove_conv::pose_in_frame(&p.to_wire(id), &frame) else {
             return;
         };
         v.pose.log(&pose);
@@ -301,7 +301,7 @@ impl Scene {
 }
 
 /// The estimate as a map fix, with its horizontal and vertical σ when the pose carries them.
-fn estimate_fix(p: &pb::PoseEstimate, lla: &Lla) -> LocationFix {
+fn estimate_fix(p: &crate::hub::Pose, lla: &Lla) -> LocationFix {
     let sigma = p.sigma_pos_ned_m.as_ref();
     let (n, e, d) = sigma.map_or((0.0, 0.0, 0.0), |s| (s.x, s.y, s.z));
     LocationFix {

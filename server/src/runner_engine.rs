@@ -5,10 +5,10 @@ use uavnav_core::{SensorEvent, VehicleConfig};
 use uavnav_proto::v1 as pb;
 use uavnav_runner::{Health, Mode, PoseOutput, RunnerParams, Step, VehicleRunner, VisionDone};
 
-use crate::hub::Pose;
 use crate::engine::{
     Engine, EngineError, EngineFactory, EngineHealth, EngineStep, VisionResult, VisionWork,
 };
+use crate::hub::Pose;
 
 /// Builds [`RunnerEngine`]s with the same parameters for every vehicle.
 #[derive(Debug, Clone)]
@@ -55,7 +55,7 @@ pub struct RunnerEngine {
 }
 
 impl RunnerEngine {
-    /// Appends `step`'s poses to `out` as wire poses and hands back its vision work.
+    /// Appends `step`'s poses to `out` and hands back its vision work.
     fn emit(&mut self, step: &mut Step, out: &mut Vec<Pose>) -> Option<VisionWork> {
         if let Some(p) = step.poses.last() {
             self.last_t_ns = p.t_ns;
