@@ -33,6 +33,8 @@ pub struct IngestStats {
     pub accepted: AtomicU64,
     /// Stream reopenings.
     pub reconnects: AtomicU64,
+    /// Messages handed to the transport per input kind, indexed like [`Leaf::INPUTS`].
+    sent_by_leaf: [AtomicU64; Leaf::INPUTS.len()],
     /// Acks with status OK (kept apart from `statuses`: the hot path takes no lock).
     ok: AtomicU64,
     statuses: Mutex<BTreeMap<String, u64>>,
@@ -62,6 +64,30 @@ impl IngestStats {
         m
     }
 
+    /// Messages handed to the transport for one input kind (IMU counts batches, not samples).
+    pub fn sent_of(&self, leaf: Leaf) -> u64 {
+        Leaf::INPUTS
+            .iter()
+            .position(|l| *l == leaf)
+            .map_or(0, |i| self.sent_by_leaf[i].load(Ordering::Relaxed))
+    }
+
+    /// Messages sent per input kind, by key chunk (`imu`, `gnss`, `mag`, ...), kinds never sent
+    /// left out.
+    pub fn sent_by_kind(&self) -> BTreeMap<&'static str, u64> {
+        Leaf::INPUTS
+            .iter()
+            .map(|l| (l.as_str(), self.sent_of(*l)))
+            .filter(|(_, n)| *n > 0)
+            .collect()
+    }
+
+    fn count_sent(&self, leaf: Leaf) {
+        if let Some(i) = Leaf::INPUTS.iter().position(|l| *l == leaf) {
+            self.sent_by_leaf[i].fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
     /// Transport errors by message.
     pub fn errors(&self) -> BTreeMap<String, u64> {
         self.errors.lock().map(|m| m.clone()).unwrap_or_default()
@@ -77,6 +103,40 @@ impl IngestStats {
         } else {
             self.status(status.as_str_name().trim_start_matches("INGEST_STATUS_"));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[tokio::test]
+    async fn counts_per_kind() {
+        let ingest = Ingest::new(Sink::Discard, Arc::default(), None);
+        let mag = Payload::Mag(pb::MagSample {
+            t_ns: 1,
+            field_x_t: 2e-5,
+            ..Default::default()
+        });
+        let baro = Payload::Baro(pb::BaroSample {
+            t_ns: 1,
+            pressure_pa: 1e5,
+            temperature_degc: None,
+        });
+        ingest.send("a", mag.clone()).await.unwrap();
+        ingest.send("a", mag).await.unwrap();
+        ingest.send("a", baro).await.unwrap();
+        let st = ingest.stats();
+        assert_eq!((st.sent_of(Leaf::Mag), st.sent_of(Leaf::Baro)), (2, 1));
+        assert_eq!(st.sent_of(Leaf::Imu), 0);
+        assert_eq!(
+            st.sent_by_kind().into_iter().collect::<Vec<_>>(),
+            [("baro", 1), ("mag", 2)]
+        );
+        assert_eq!(
+            (leaf_of(&Payload::Mag(Default::default())).message_name()),
+            "uavnav.v1.MagSample"
+        );
     }
 }
 
@@ -103,6 +163,8 @@ pub fn leaf_of(p: &Payload) -> Leaf {
     match p {
         Payload::Imu(_) => Leaf::Imu,
         Payload::Gnss(_) => Leaf::Gnss,
+        Payload::Mag(_) => Leaf::Mag,
+        Payload::Baro(_) => Leaf::Baro,
         Payload::Camera(_) => Leaf::Camera,
         Payload::Config(_) => Leaf::Config,
     }
@@ -113,6 +175,8 @@ pub fn encode_payload(p: &Payload) -> Vec<u8> {
     match p {
         Payload::Imu(m) => m.encode_to_vec(),
         Payload::Gnss(m) => m.encode_to_vec(),
+        Payload::Mag(m) => m.encode_to_vec(),
+        Payload::Baro(m) => m.encode_to_vec(),
         Payload::Camera(m) => m.encode_to_vec(),
         Payload::Config(m) => m.encode_to_vec(),
     }
@@ -122,6 +186,7 @@ impl IngestSender {
     /// Sends one message for `vehicle_id`. Waits while the transport applies back-pressure.
     pub async fn send(&self, vehicle_id: &str, payload: Payload) -> Result<(), ClientError> {
         check_vehicle_id(vehicle_id)?;
+        let leaf = leaf_of(&payload);
         match &self.sink {
             Sink::Grpc(tx) => {
                 let sequence = self.seq.fetch_add(1, Ordering::Relaxed);
@@ -137,7 +202,6 @@ impl IngestSender {
                 self.stats.bytes.fetch_add(len as u64, Ordering::Relaxed);
             }
             Sink::Zenoh(session) => {
-                let leaf = leaf_of(&payload);
                 let key = crate::keys::vehicle_key(vehicle_id, leaf);
                 self.await_subscriber(session, vehicle_id, &key).await;
                 let body = encode_payload(&payload);
@@ -175,6 +239,7 @@ impl IngestSender {
             }
         }
         self.stats.sent.fetch_add(1, Ordering::Relaxed);
+        self.stats.count_sent(leaf);
         Ok(())
     }
 
@@ -213,6 +278,8 @@ fn payload_len(p: &Payload) -> usize {
     match p {
         Payload::Imu(m) => m.encoded_len(),
         Payload::Gnss(m) => m.encoded_len(),
+        Payload::Mag(m) => m.encoded_len(),
+        Payload::Baro(m) => m.encoded_len(),
         Payload::Camera(m) => m.encoded_len(),
         Payload::Config(m) => m.encoded_len(),
     }

@@ -16,6 +16,10 @@ pub enum Leaf {
     Imu,
     /// `uavnav.v1.GnssFix` input.
     Gnss,
+    /// `uavnav.v1.MagSample` input.
+    Mag,
+    /// `uavnav.v1.BaroSample` input.
+    Baro,
     /// `uavnav.v1.CameraFrame` input.
     Camera,
     /// `uavnav.v1.VehicleConfig` input.
@@ -27,11 +31,23 @@ pub enum Leaf {
 }
 
 impl Leaf {
+    /// The input leaves (what a sender publishes), in the service's tie order.
+    pub const INPUTS: [Leaf; 6] = [
+        Leaf::Imu,
+        Leaf::Gnss,
+        Leaf::Mag,
+        Leaf::Baro,
+        Leaf::Camera,
+        Leaf::Config,
+    ];
+
     /// The key chunk.
     pub fn as_str(self) -> &'static str {
         match self {
             Leaf::Imu => "imu",
             Leaf::Gnss => "gnss",
+            Leaf::Mag => "mag",
+            Leaf::Baro => "baro",
             Leaf::Camera => "camera",
             Leaf::Config => "config",
             Leaf::Pose => "pose",
@@ -45,6 +61,8 @@ impl Leaf {
         match self {
             Leaf::Imu => names::IMU_BATCH,
             Leaf::Gnss => names::GNSS_FIX,
+            Leaf::Mag => names::MAG_SAMPLE,
+            Leaf::Baro => names::BARO_SAMPLE,
             Leaf::Camera => names::CAMERA_FRAME,
             Leaf::Config => names::VEHICLE_CONFIG,
             Leaf::Pose => names::POSE_ESTIMATE,
@@ -57,6 +75,8 @@ impl Leaf {
         Some(match s {
             "imu" => Leaf::Imu,
             "gnss" => Leaf::Gnss,
+            "mag" => Leaf::Mag,
+            "baro" => Leaf::Baro,
             "camera" => Leaf::Camera,
             "config" => Leaf::Config,
             "pose" => Leaf::Pose,
@@ -92,6 +112,8 @@ mod tests {
         for leaf in [
             Leaf::Imu,
             Leaf::Gnss,
+            Leaf::Mag,
+            Leaf::Baro,
             Leaf::Camera,
             Leaf::Config,
             Leaf::Pose,

@@ -127,6 +127,8 @@ pub fn shift_payload(p: &Payload, dt_ns: i64) -> Payload {
     match &mut p {
         Payload::Imu(b) => b.samples.iter_mut().for_each(|s| s.t_ns += dt_ns),
         Payload::Gnss(g) => g.t_ns += dt_ns,
+        Payload::Mag(m) => m.t_ns += dt_ns,
+        Payload::Baro(b) => b.t_ns += dt_ns,
         Payload::Camera(c) => {
             c.t_ns += dt_ns;
             if let Some(img) = c.image.as_mut() {
@@ -159,10 +161,9 @@ mod tests {
             lat_deg: 41.0,
             lon_deg: 14.0,
             alt_m: 100.0,
-            vel_ned_mps: Vector3::zeros(),
+            velocity: None,
             sigma_h_m: 1.0,
             sigma_v_m: 1.0,
-            sigma_vel_mps: 0.1,
             fix_type: uavnav_core::FixType::Fix3d,
             num_sats: 9,
         });
@@ -185,6 +186,8 @@ mod tests {
             .map(|m| match &m.payload {
                 Payload::Imu(b) => (m.offset_ns, "imu", b.samples.len()),
                 Payload::Gnss(_) => (m.offset_ns, "gnss", 1),
+                Payload::Mag(_) => (m.offset_ns, "mag", 1),
+                Payload::Baro(_) => (m.offset_ns, "baro", 1),
                 Payload::Config(_) => (m.offset_ns, "config", 1),
                 Payload::Camera(_) => (m.offset_ns, "camera", 1),
             })

@@ -17,6 +17,12 @@ fn zenoh_keys_match_the_service() {
         keys::pose_latest_key("*"),
         uavnavd::zenoh_io::POSE_LATEST_KEYS
     );
+    let client_inputs: Vec<&str> = keys::Leaf::INPUTS.iter().map(|l| l.as_str()).collect();
+    let service_inputs: Vec<&str> = uavnavd::zenoh_io::INPUT_LEAVES
+        .iter()
+        .map(|(l, _)| *l)
+        .collect();
+    assert_eq!(client_inputs, service_inputs);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -1,6 +1,6 @@
 //! Per-vehicle configuration: what the estimator must know about the sensors and the terrain.
 
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
 use crate::camera::CameraModel;
 
@@ -43,6 +43,10 @@ pub struct GnssConfig {
     pub rate_hz: f64,
     /// Antenna phase centre in the body frame (the lever arm from the IMU), m.
     pub lever_arm_body_m: Vector3<f64>,
+    /// How long after its time of validity a fix is stamped, ns (an autopilot stamps a fix when it
+    /// processes it: ArduPilot `EK3_GPS_DELAY`, PX4 `EKF2_GPS_DELAY`). 0 when stamps are validity
+    /// times.
+    pub delay_ns: i64,
 }
 
 impl Default for GnssConfig {
@@ -50,6 +54,49 @@ impl Default for GnssConfig {
         Self {
             rate_hz: 5.0,
             lever_arm_body_m: Vector3::zeros(),
+            delay_ns: 0,
+        }
+    }
+}
+
+/// Magnetometer configuration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MagConfig {
+    /// Nominal sample rate, Hz.
+    pub rate_hz: f64,
+    /// Rotation from the magnetometer frame into the body frame (`T_BS` of `mag0/sensor.yaml`).
+    pub body_from_mag: UnitQuaternion<f64>,
+    /// 1-σ white noise per axis and sample, T.
+    pub sigma_t: f64,
+}
+
+impl Default for MagConfig {
+    fn default() -> Self {
+        Self {
+            rate_hz: 10.0,
+            body_from_mag: UnitQuaternion::identity(),
+            // a typical MEMS magnetometer (~0.1 µT per sample); real in-flight disturbances are
+            // larger and are the estimator's business, not the sensor's
+            sigma_t: 1.0e-7,
+        }
+    }
+}
+
+/// Barometer configuration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BaroConfig {
+    /// Nominal sample rate, Hz.
+    pub rate_hz: f64,
+    /// 1-σ white noise per sample, Pa.
+    pub sigma_pressure_pa: f64,
+}
+
+impl Default for BaroConfig {
+    fn default() -> Self {
+        Self {
+            rate_hz: 10.0,
+            // an MS5611-class sensor at its highest oversampling: ~1 Pa (8 cm of height)
+            sigma_pressure_pa: 1.0,
         }
     }
 }
@@ -105,6 +152,10 @@ pub struct VehicleConfig {
     pub imu: ImuConfig,
     /// GNSS receiver, if fitted.
     pub gnss: Option<GnssConfig>,
+    /// Magnetometer, if fitted.
+    pub mag: Option<MagConfig>,
+    /// Barometer, if fitted.
+    pub baro: Option<BaroConfig>,
     /// Camera 0, if fitted.
     pub camera: Option<CameraConfig>,
     /// Terrain elevation above the WGS84 ellipsoid, m (the flat-Earth-surface model of the paper).

@@ -4,8 +4,8 @@
 //!
 //! | module | what it holds |
 //! |---|---|
-//! | [`sensors`] | sensor samples (IMU, GNSS, camera frame) and the [`sensors::SensorEvent`] stream item |
-//! | [`config`] | per-vehicle configuration: IMU noise, GNSS lever arm, camera, terrain, filter profile |
+//! | [`sensors`] | sensor samples (IMU, GNSS, magnetometer, barometer, camera frame) and the [`sensors::SensorEvent`] stream item |
+//! | [`config`] | per-vehicle configuration: IMU noise, GNSS lever arm and delay, magnetometer, barometer, camera, terrain, filter profile |
 //! | [`geodesy`] | WGS84: LLA ↔ ECEF ↔ local NED, normal gravity, radii of curvature |
 //! | [`camera`] | pinhole + radial-tangential camera model (project, distort, undistort) |
 //! | [`rotation`] | ZYX Euler angles, skew matrices, small-angle helpers |
@@ -21,16 +21,23 @@ pub mod camera;
 pub mod config;
 pub mod egomotion;
 pub mod geodesy;
+pub mod geoid;
+pub mod magnetic;
 pub mod rng;
 pub mod rotation;
 pub mod sensors;
 pub mod truth;
 
 pub use camera::{CameraModel, Distortion};
-pub use config::{CameraConfig, FilterProfile, GnssConfig, ImuConfig, VehicleConfig};
+pub use config::{
+    BaroConfig, CameraConfig, FilterProfile, GnssConfig, ImuConfig, MagConfig, VehicleConfig,
+};
 pub use egomotion::{Egomotion, EgomotionSolver, MotionPrior};
 pub use geodesy::{Lla, LocalFrame};
-pub use sensors::{CameraFrame, FixType, GnssFix, ImageFormat, ImuSample, SensorEvent};
+pub use sensors::{
+    BaroSample, CameraFrame, FixType, GnssFix, GnssVelocity, ImageFormat, ImuSample, MagSample,
+    SensorEvent,
+};
 pub use truth::TruthSample;
 
 /// Nanoseconds per second, for `t_ns` ↔ seconds conversions.

@@ -31,7 +31,46 @@ pub enum FixType {
     RtkFixed,
 }
 
-/// One GNSS receiver solution at the antenna phase centre.
+/// The antenna velocity of a GNSS solution in local NED. The vertical component is optional on its
+/// own: MAVLink `GPS_RAW_INT`-style sources give ground speed and course only.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GnssVelocity {
+    /// North velocity, m/s.
+    pub north_mps: f64,
+    /// East velocity, m/s.
+    pub east_mps: f64,
+    /// Down velocity, m/s, when the receiver gives it.
+    pub down_mps: Option<f64>,
+    /// 1-σ error per axis, m/s.
+    pub sigma_mps: f64,
+}
+
+impl GnssVelocity {
+    /// A full 3-D velocity.
+    pub fn ned(v_ned_mps: Vector3<f64>, sigma_mps: f64) -> Self {
+        Self {
+            north_mps: v_ned_mps.x,
+            east_mps: v_ned_mps.y,
+            down_mps: Some(v_ned_mps.z),
+            sigma_mps,
+        }
+    }
+
+    /// The 3-D velocity when all three components are known.
+    pub fn ned_mps(&self) -> Option<Vector3<f64>> {
+        self.down_mps
+            .map(|d| Vector3::new(self.north_mps, self.east_mps, d))
+    }
+
+    /// The horizontal velocity (north, east), m/s.
+    pub fn horizontal_mps(&self) -> nalgebra::Vector2<f64> {
+        nalgebra::Vector2::new(self.north_mps, self.east_mps)
+    }
+}
+
+/// One GNSS receiver solution at the antenna phase centre. `t_ns` is the stamp as the source gives
+/// it; the solution was valid at `t_ns − GnssConfig::delay_ns` (the estimator applies the delay, so
+/// every transport and file format is treated alike).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GnssFix {
     /// Time of validity, ns.
@@ -42,18 +81,38 @@ pub struct GnssFix {
     pub lon_deg: f64,
     /// Height above the WGS84 ellipsoid, m.
     pub alt_m: f64,
-    /// Antenna velocity in local NED, m/s.
-    pub vel_ned_mps: Vector3<f64>,
+    /// Antenna velocity, when the receiver gives one (a ROS `NavSatFix` or a position-only
+    /// receiver does not).
+    pub velocity: Option<GnssVelocity>,
     /// 1-σ horizontal position error, m.
     pub sigma_h_m: f64,
     /// 1-σ vertical position error, m.
     pub sigma_v_m: f64,
-    /// 1-σ velocity error per axis, m/s.
-    pub sigma_vel_mps: f64,
     /// Fix quality.
     pub fix_type: FixType,
     /// Satellites used (0 when unknown).
     pub num_sats: u32,
+}
+
+/// One magnetometer sample: the calibrated (hard- and soft-iron corrected) flux density in the
+/// magnetometer frame (`MagConfig::body_from_mag` rotates it into the body frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MagSample {
+    /// Sample time, ns.
+    pub t_ns: i64,
+    /// Magnetic flux density, magnetometer frame, tesla.
+    pub field_t: Vector3<f64>,
+}
+
+/// One barometer sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BaroSample {
+    /// Sample time, ns.
+    pub t_ns: i64,
+    /// Static pressure, Pa.
+    pub pressure_pa: f64,
+    /// The sensor's own temperature, °C, when given (not the air's: it warms during a flight).
+    pub temperature_degc: Option<f64>,
 }
 
 /// Compressed image encoding.
@@ -106,6 +165,10 @@ pub enum SensorEvent {
     Imu(ImuSample),
     /// A GNSS fix.
     Gnss(GnssFix),
+    /// A magnetometer sample.
+    Mag(MagSample),
+    /// A barometer sample.
+    Baro(BaroSample),
     /// A camera frame.
     Camera(CameraFrame),
 }
@@ -116,7 +179,21 @@ impl SensorEvent {
         match self {
             SensorEvent::Imu(s) => s.t_ns,
             SensorEvent::Gnss(g) => g.t_ns,
+            SensorEvent::Mag(m) => m.t_ns,
+            SensorEvent::Baro(b) => b.t_ns,
             SensorEvent::Camera(c) => c.t_ns,
+        }
+    }
+
+    /// The tie-break rank among events with the same time: IMU, GNSS, magnetometer, barometer,
+    /// camera (the dataset reader and the service's reorder window both order by `(t_ns, rank)`).
+    pub fn rank(&self) -> u8 {
+        match self {
+            SensorEvent::Imu(_) => 0,
+            SensorEvent::Gnss(_) => 1,
+            SensorEvent::Mag(_) => 2,
+            SensorEvent::Baro(_) => 3,
+            SensorEvent::Camera(_) => 4,
         }
     }
 }

@@ -18,6 +18,10 @@ pub struct ConvertSummary {
     pub imu: usize,
     /// GNSS fixes.
     pub gnss: usize,
+    /// Magnetometer samples.
+    pub mag: usize,
+    /// Barometer samples.
+    pub baro: usize,
     /// Camera frames.
     pub frames: usize,
     /// Truth samples.
@@ -31,6 +35,8 @@ impl ConvertSummary {
         match e {
             SensorEvent::Imu(_) => self.imu += 1,
             SensorEvent::Gnss(_) => self.gnss += 1,
+            SensorEvent::Mag(_) => self.mag += 1,
+            SensorEvent::Baro(_) => self.baro += 1,
             SensorEvent::Camera(_) => self.frames += 1,
         }
     }

@@ -155,6 +155,11 @@ impl Row<'_> {
         )
     }
 
+    /// A parse error about this row as a whole.
+    pub fn invalid(&self, message: impl Into<String>) -> DatasetError {
+        DatasetError::parse(&self.reader.path, self.reader.line, message.into())
+    }
+
     /// Cell `col` (request order) as text.
     pub fn str(&self, col: usize) -> &str {
         self.cells[col]
@@ -174,6 +179,15 @@ impl Row<'_> {
             .ok()
             .filter(|v| v.is_finite())
             .ok_or_else(|| self.error(col, "a finite number"))
+    }
+
+    /// Cell `col` as a finite number, or `None` when the cell is empty (an optional value).
+    pub fn opt_f64(&self, col: usize) -> Result<Option<f64>> {
+        if self.cells[col].trim().is_empty() {
+            Ok(None)
+        } else {
+            self.f64(col).map(Some)
+        }
     }
 
     /// Cells `first..first + N` as numbers.

@@ -10,8 +10,9 @@ pub trait EventSource: Send {
     fn next_event(&mut self) -> Option<Result<SensorEvent>>;
 }
 
-/// A k-way merge by `t_ns`. Equal times come out in source order (IMU before GNSS before camera),
-/// so the output is deterministic. Holds at most one pending event per source, so a camera stream
+/// A k-way merge by `(t_ns, SensorEvent::rank)`: equal times come out IMU, GNSS, magnetometer,
+/// barometer, camera whatever the order of the sources (the service's reorder window breaks ties
+/// the same way), then in source order, so the output is deterministic. Holds at most one pending event per source, so a camera stream
 /// keeps at most one image in memory.
 pub struct Merge {
     sources: Vec<Box<dyn EventSource>>,
@@ -29,7 +30,7 @@ impl std::fmt::Debug for Merge {
 }
 
 impl Merge {
-    /// Merges `sources`, listed in tie-break order.
+    /// Merges `sources` (ties between events of the same rank keep the order of `sources`).
     pub fn new(sources: Vec<Box<dyn EventSource>>) -> Self {
         let n = sources.len();
         Merge {
@@ -69,9 +70,13 @@ impl Iterator for Merge {
         let mut best: Option<usize> = None;
         for (i, head) in self.heads.iter().enumerate() {
             if let Some(ev) = head {
-                // Strictly earlier wins, so ties keep source order.
-                if best.is_none_or(|b| self.heads[b].as_ref().is_some_and(|h| ev.t_ns() < h.t_ns()))
-                {
+                // Strictly earlier wins, so full ties keep source order.
+                let key = (ev.t_ns(), ev.rank());
+                if best.is_none_or(|b| {
+                    self.heads[b]
+                        .as_ref()
+                        .is_some_and(|h| key < (h.t_ns(), h.rank()))
+                }) {
                     best = Some(i);
                 }
             }
@@ -100,6 +105,39 @@ mod tests {
                 accel_mps2: Vector3::zeros(),
             })))
         }
+    }
+
+    struct Events(Vec<SensorEvent>);
+    impl EventSource for Events {
+        fn next_event(&mut self) -> Option<Result<SensorEvent>> {
+            (!self.0.is_empty()).then(|| Ok(self.0.remove(0)))
+        }
+    }
+
+    #[test]
+    fn ties_go_by_rank_whatever_the_source_order() {
+        use uavnav_core::{BaroSample, MagSample};
+        let baro = SensorEvent::Baro(BaroSample {
+            t_ns: 5,
+            pressure_pa: 1e5,
+            temperature_degc: None,
+        });
+        let mag = SensorEvent::Mag(MagSample {
+            t_ns: 5,
+            field_t: Vector3::zeros(),
+        });
+        let imu = SensorEvent::Imu(ImuSample {
+            t_ns: 5,
+            gyro_radps: Vector3::zeros(),
+            accel_mps2: Vector3::zeros(),
+        });
+        let m = Merge::new(vec![
+            Box::new(Events(vec![baro])),
+            Box::new(Events(vec![mag])),
+            Box::new(Events(vec![imu])),
+        ]);
+        let ranks: Vec<u8> = m.map(|e| e.unwrap().rank()).collect();
+        assert_eq!(ranks, vec![0, 2, 3]);
     }
 
     #[test]

@@ -119,7 +119,7 @@ mod tests {
         Event::Gnss(GnssMeas {
             t_ns: t,
             pos_ned_m: Vector3::zeros(),
-            vel_ned_mps: Vector3::zeros(),
+            vel_ned_mps: Some(Vector3::zeros()),
             sigma_h_m: 1.0,
             sigma_v_m: 1.0,
             sigma_vel_mps: 0.1,

@@ -188,14 +188,7 @@ impl Eskf {
             self.late_dropped += 1;
             return;
         }
-        let meas = GnssMeas {
-            t_ns: fix.t_ns,
-            pos_ned_m: frame.lla_to_ned(&lla),
-            vel_ned_mps: fix.vel_ned_mps,
-            sigma_h_m: fix.sigma_h_m,
-            sigma_v_m: fix.sigma_v_m,
-            sigma_vel_mps: fix.sigma_vel_mps,
-        };
+        let meas = GnssMeas::from_fix(fix, frame.lla_to_ned(&lla));
         if self.gnss_pos.diag.fused == 0 && self.x.is_none() {
             // The Gauss–Markov strength follows the receiver's reported accuracy at start.
             let f = self.params.gnss_pos_correlated_fraction;
@@ -376,9 +369,12 @@ impl Eskf {
 
     fn fuse_gnss(&mut self, m: &GnssMeas, imu: &ImuSample) {
         let Some(x) = self.x else { return };
-        if !self.yaw_aligned && m.vel_ned_mps.xy().norm() >= self.params.init_min_speed_mps {
+        if !self.yaw_aligned
+            && let Some(v) = m.vel_ned_mps
+            && v.xy().norm() >= self.params.init_min_speed_mps
+        {
             if let Some(xm) = self.x.as_mut() {
-                yaw_from_course(xm, &mut self.p, &m.vel_ned_mps, &self.params);
+                yaw_from_course(xm, &mut self.p, &v, &self.params);
             }
             self.yaw_aligned = true;
             self.corrected = true;

@@ -1,13 +1,18 @@
 //! [`Estimator`]: one vehicle's filter (either profile) behind input validation.
 
-use uavnav_core::{Egomotion, FilterProfile, GnssFix, ImuSample, Lla, MotionPrior, VehicleConfig};
+use uavnav_core::{
+    BaroSample, Egomotion, FilterProfile, GnssFix, ImuSample, Lla, MagSample, MotionPrior,
+    VehicleConfig,
+};
 
 use crate::eskf::Eskf;
 use crate::health::Health;
 use crate::output::PoseOutput;
 use crate::paper::PaperFilter;
 use crate::params::EstimatorParams;
-use crate::validate::{InputError, check_egomotion, check_gnss, check_imu};
+use crate::validate::{
+    InputError, check_baro, check_egomotion, check_gnss, check_imu, check_mag,
+};
 
 /// Consecutive continuous samples after a rejected time jump that make the estimator accept the
 /// resumed stream by restarting (a genuine gap, not a glitch).
@@ -28,7 +33,11 @@ pub struct Estimator {
     has_camera: bool,
     last_imu_t_ns: Option<i64>,
     last_gnss_t_ns: Option<i64>,
+    last_mag_t_ns: Option<i64>,
+    last_baro_t_ns: Option<i64>,
     last_ego_t1_ns: Option<i64>,
+    /// `GnssConfig::delay_ns`: a fix stamped `t` was valid at `t − delay`.
+    gnss_delay_ns: i64,
     /// Time of the last sample rejected for a time jump and how many continuous ones followed.
     jump_run: Option<(i64, u32)>,
     inputs_rejected: u64,
@@ -53,7 +62,10 @@ impl Estimator {
             has_camera: config.camera.is_some(),
             last_imu_t_ns: None,
             last_gnss_t_ns: None,
+            last_mag_t_ns: None,
+            last_baro_t_ns: None,
             last_ego_t1_ns: None,
+            gnss_delay_ns: config.gnss.map_or(0, |g| g.delay_ns),
             jump_run: None,
             inputs_rejected: 0,
         }
@@ -105,8 +117,14 @@ impl Estimator {
         self.inputs_rejected = rejected;
     }
 
-    /// Adds a GNSS fix (fused at its own time, behind the newest IMU sample).
-    pub fn push_gnss(&mut self, f: &GnssFix) -> Result<(), InputError> {
+    /// Adds a GNSS fix (fused at its time of validity, its stamp less the configured GNSS delay,
+    /// behind the newest IMU sample).
+    pub fn push_gnss(&mut self, fix: &GnssFix) -> Result<(), InputError> {
+        let shifted = GnssFix {
+            t_ns: fix.t_ns.saturating_sub(self.gnss_delay_ns),
+            ..*fix
+        };
+        let f = &shifted;
         if let Err(e) = check_gnss(f, self.last_gnss_t_ns, self.last_imu_t_ns, &self.params) {
             self.inputs_rejected += 1;
             return Err(e);
@@ -116,6 +134,26 @@ impl Estimator {
             Profile::Eskf(e) => e.push_gnss(f),
             Profile::Paper(p) => p.push_gnss(f),
         }
+        Ok(())
+    }
+
+    /// Adds a magnetometer sample (validated; the filters that use it fuse it at its time).
+    pub fn push_mag(&mut self, m: &MagSample) -> Result<(), InputError> {
+        if let Err(e) = check_mag(m, self.last_mag_t_ns) {
+            self.inputs_rejected += 1;
+            return Err(e);
+        }
+        self.last_mag_t_ns = Some(m.t_ns);
+        Ok(())
+    }
+
+    /// Adds a barometer sample (validated; the filters that use it fuse it at its time).
+    pub fn push_baro(&mut self, b: &BaroSample) -> Result<(), InputError> {
+        if let Err(e) = check_baro(b, self.last_baro_t_ns) {
+            self.inputs_rejected += 1;
+            return Err(e);
+        }
+        self.last_baro_t_ns = Some(b.t_ns);
         Ok(())
     }
 
@@ -171,6 +209,8 @@ impl Estimator {
         }
         self.last_imu_t_ns = None;
         self.last_gnss_t_ns = None;
+        self.last_mag_t_ns = None;
+        self.last_baro_t_ns = None;
         self.last_ego_t1_ns = None;
         self.jump_run = None;
         self.inputs_rejected = 0;

@@ -56,6 +56,8 @@ impl Initialiser {
         params: &EstimatorParams,
         gm_sigma_m: [f64; 3],
     ) -> Option<InitResult> {
+        // The alignment needs the receiver's velocity (a position-only fix waits for the next).
+        let v_fix = fix.vel_ned_mps?;
         let prev = self.prev_fix.replace(*fix);
         let (t_first, t_last) = (self.samples.front()?.0, self.samples.back()?.0);
         if ((t_last - t_first) as f64) < 0.8 * params.init_level_window_s * 1e9 {
@@ -66,22 +68,26 @@ impl Initialiser {
         let w_b = self.samples.iter().map(|s| s.1).sum::<Vector3<f64>>() / n;
         // Kinematic acceleration from consecutive GNSS velocities (zero without a previous fix).
         let a_n = match prev {
-            Some(p) if fix.t_ns > p.t_ns && fix.t_ns - p.t_ns < 2_000_000_000 => {
-                (fix.vel_ned_mps - p.vel_ned_mps) / ((fix.t_ns - p.t_ns) as f64 * 1e-9)
+            Some(GnssMeas {
+                t_ns,
+                vel_ned_mps: Some(v_prev),
+                ..
+            }) if fix.t_ns > t_ns && fix.t_ns - t_ns < 2_000_000_000 => {
+                (v_fix - v_prev) / ((fix.t_ns - t_ns) as f64 * 1e-9)
             }
             _ => Vector3::zeros(),
         };
-        let speed_h = fix.vel_ned_mps.xy().norm();
+        let speed_h = v_fix.xy().norm();
         let yaw_aligned = speed_h >= params.init_min_speed_mps;
         let yaw = if yaw_aligned {
-            fix.vel_ned_mps.y.atan2(fix.vel_ned_mps.x)
+            v_fix.y.atan2(v_fix.x)
         } else {
             0.0
         };
         let q = attitude_from_gravity(&f_b, &(g_n - a_n), yaw)?;
         let c = q.to_rotation_matrix();
         let p = fix.pos_ned_m - c * lever_b;
-        let v = fix.vel_ned_mps - c * w_b.cross(lever_b);
+        let v = v_fix - c * w_b.cross(lever_b);
         let x = Nominal {
             t_ns: fix.t_ns,
             p,

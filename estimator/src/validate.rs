@@ -1,7 +1,7 @@
 //! Input validation: every sample is checked before it can touch the filter, so a rejected input
 //! leaves the state exactly as it was.
 
-use uavnav_core::{Egomotion, FixType, GnssFix, ImuSample};
+use uavnav_core::{BaroSample, Egomotion, FixType, GnssFix, ImuSample, MagSample};
 
 use crate::params::EstimatorParams;
 
@@ -76,6 +76,53 @@ fn finite(x: f64, what: &'static str) -> Result<(), InputError> {
     }
 }
 
+/// Largest magnetic flux density accepted, T: the Earth's field is 22–67 µT; a reading of a
+/// millitesla is a saturated or broken sensor, not a field to fuse.
+pub const MAX_MAG_FIELD_T: f64 = 1.0e-3;
+
+/// Checks one magnetometer sample against the previous accepted sample time.
+pub fn check_mag(s: &MagSample, last_t_ns: Option<i64>) -> Result<(), InputError> {
+    finite3(&s.field_t, "magnetic field")?;
+    if s.field_t.norm() > MAX_MAG_FIELD_T {
+        return Err(InputError::Absurd {
+            what: "|magnetic field| T",
+            value: s.field_t.norm(),
+        });
+    }
+    if let Some(last) = last_t_ns {
+        check_order(s.t_ns, last)?;
+    }
+    Ok(())
+}
+
+/// Accepted static pressure range, Pa: from ~30 km altitude (1.2 kPa) to below the Dead Sea
+/// (~107 kPa) with margin.
+pub const PRESSURE_RANGE_PA: std::ops::RangeInclusive<f64> = 500.0..=120_000.0;
+
+/// Checks one barometer sample against the previous accepted sample time.
+pub fn check_baro(s: &BaroSample, last_t_ns: Option<i64>) -> Result<(), InputError> {
+    finite(s.pressure_pa, "pressure")?;
+    if let Some(t) = s.temperature_degc {
+        finite(t, "baro temperature")?;
+        if !(-90.0..=150.0).contains(&t) {
+            return Err(InputError::Absurd {
+                what: "baro temperature degC",
+                value: t,
+            });
+        }
+    }
+    if !PRESSURE_RANGE_PA.contains(&s.pressure_pa) {
+        return Err(InputError::Absurd {
+            what: "pressure Pa",
+            value: s.pressure_pa,
+        });
+    }
+    if let Some(last) = last_t_ns {
+        check_order(s.t_ns, last)?;
+    }
+    Ok(())
+}
+
 /// Checks one IMU sample against the previous accepted sample time.
 pub fn check_imu(
     s: &ImuSample,
@@ -137,10 +184,16 @@ pub fn check_gnss(
     finite(f.lat_deg, "latitude")?;
     finite(f.lon_deg, "longitude")?;
     finite(f.alt_m, "altitude")?;
-    finite3(&f.vel_ned_mps, "GNSS velocity")?;
+    if let Some(v) = &f.velocity {
+        finite(v.north_mps, "GNSS velocity north")?;
+        finite(v.east_mps, "GNSS velocity east")?;
+        if let Some(d) = v.down_mps {
+            finite(d, "GNSS velocity down")?;
+        }
+        finite(v.sigma_mps, "sigma_vel")?;
+    }
     finite(f.sigma_h_m, "sigma_h")?;
     finite(f.sigma_v_m, "sigma_v")?;
-    finite(f.sigma_vel_mps, "sigma_vel")?;
     if f.fix_type == FixType::None {
         return Err(InputError::NoFix);
     }
@@ -162,17 +215,20 @@ pub fn check_gnss(
             value: f.alt_m,
         });
     }
-    if f.vel_ned_mps.norm() > 600.0 {
-        return Err(InputError::Absurd {
-            what: "|GNSS velocity| m/s",
-            value: f.vel_ned_mps.norm(),
-        });
+    if let Some(v) = &f.velocity {
+        let speed = v.horizontal_mps().norm().hypot(v.down_mps.unwrap_or(0.0));
+        if speed > 600.0 {
+            return Err(InputError::Absurd {
+                what: "|GNSS velocity| m/s",
+                value: speed,
+            });
+        }
     }
-    for (what, s) in [
-        ("sigma_h m", f.sigma_h_m),
-        ("sigma_v m", f.sigma_v_m),
-        ("sigma_vel m/s", f.sigma_vel_mps),
-    ] {
+    let sigma_vel = f.velocity.map(|v| ("sigma_vel m/s", v.sigma_mps));
+    for (what, s) in [("sigma_h m", f.sigma_h_m), ("sigma_v m", f.sigma_v_m)]
+        .into_iter()
+        .chain(sigma_vel)
+    {
         if s <= 0.0 || s > 1e4 {
             return Err(InputError::Absurd { what, value: s });
         }

@@ -37,6 +37,7 @@ fn static_data(
         gnss: Some(GnssConfig {
             rate_hz: 5.0,
             lever_arm_body_m: Vector3::new(0.2, 0.0, -0.1),
+            delay_ns: 0,
         }),
         ..Default::default()
     };
@@ -63,10 +64,9 @@ fn static_data(
                 lat_deg: lla.lat_deg(),
                 lon_deg: lla.lon_deg(),
                 alt_m: lla.alt_m,
-                vel_ned_mps: rng.gaussian3(0.05),
+                velocity: Some(uavnav_core::GnssVelocity::ned(rng.gaussian3(0.05), 0.05)),
                 sigma_h_m: 0.5,
                 sigma_v_m: 0.8,
-                sigma_vel_mps: 0.05,
                 fix_type: FixType::Fix3d,
                 num_sats: 10,
             });

@@ -43,10 +43,10 @@ pub fn location_fix(f: &GnssFix) -> LocationFix {
         position_covariance_type: PositionCovarianceType::DiagonalKnown as i32,
         heading: None,
         // NED → ENU: swap north/east, negate down.
-        velocity: Some(foxglove::messages::Vector3 {
-            x: f.vel_ned_mps.y,
-            y: f.vel_ned_mps.x,
-            z: -f.vel_ned_mps.z,
+        velocity: f.velocity.map(|v| foxglove::messages::Vector3 {
+            x: v.east_mps,
+            y: v.north_mps,
+            z: -v.down_mps.unwrap_or(0.0),
         }),
         color: None,
         metadata: Vec::new(),

@@ -54,6 +54,10 @@ pub mod names {
     /// `uavnav.v1.GnssFix`.
     pub const GNSS_FIX: &str = "uavnav.v1.GnssFix";
     /// `uavnav.v1.CameraFrame`.
+    /// `uavnav.v1.MagSample`.
+    pub const MAG_SAMPLE: &str = "uavnav.v1.MagSample";
+    /// `uavnav.v1.BaroSample`.
+    pub const BARO_SAMPLE: &str = "uavnav.v1.BaroSample";
     pub const CAMERA_FRAME: &str = "uavnav.v1.CameraFrame";
     /// `uavnav.v1.VehicleConfig`.
     pub const VEHICLE_CONFIG: &str = "uavnav.v1.VehicleConfig";

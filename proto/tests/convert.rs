@@ -21,10 +21,9 @@ fn fix(lat: f64, lon: f64, alt: f64, v: [f64; 3], s: [f64; 3], t_ns: i64, ft: Fi
         lat_deg: lat,
         lon_deg: lon,
         alt_m: alt,
-        vel_ned_mps: Vector3::from(v),
+        velocity: Some(uavnav_core::GnssVelocity::ned(Vector3::from(v), s[2])),
         sigma_h_m: s[0],
         sigma_v_m: s[1],
-        sigma_vel_mps: s[2],
         fix_type: ft,
         num_sats: 9,
     }
@@ -86,7 +85,9 @@ proptest! {
                                  terrain in -400.0f64..5000.0, paper in any::<bool>()) {
         let c = VehicleConfig {
             imu: ImuConfig::TACTICAL_MEMS,
-            gnss: Some(GnssConfig { rate_hz: 5.0, lever_arm_body_m: Vector3::from(lever) }),
+            gnss: Some(GnssConfig { rate_hz: 5.0, lever_arm_body_m: Vector3::from(lever), delay_ns: 0 }),
+            mag: None,
+            baro: None,
             camera: Some(camera_config(k, rpy, t)),
             terrain_elevation_m: terrain,
             profile: if paper { FilterProfile::Paper } else { FilterProfile::Eskf },
@@ -173,7 +174,7 @@ fn nan_and_inf_are_named() {
     assert!(matches!(e, ConvertError::NotFinite { .. }), "{e}");
 
     let mut g = good_fix();
-    g.vel_down_mps = f64::INFINITY;
+    g.vel_down_mps = Some(f64::INFINITY);
     assert_eq!(field_of(GnssFix::try_from(&g)).0, "vel_down_mps");
 }
 

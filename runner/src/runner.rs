@@ -20,6 +20,10 @@ pub struct RunnerParams {
     pub max_held_events: usize,
     /// Feed GNSS to the estimator (`--no-gnss` turns it off).
     pub use_gnss: bool,
+    /// Feed the magnetometer to the estimator (`--no-mag` turns it off).
+    pub use_mag: bool,
+    /// Feed the barometer to the estimator (`--no-baro` turns it off).
+    pub use_baro: bool,
     /// Run vision on camera frames (`--no-vision` turns it off).
     pub use_vision: bool,
     /// Estimator parameters.
@@ -39,6 +43,8 @@ impl Default for RunnerParams {
             vision_delay_ns: DEFAULT_VISION_DELAY_NS,
             max_held_events: DEFAULT_MAX_HELD_EVENTS,
             use_gnss: true,
+            use_mag: true,
+            use_baro: true,
             use_vision: true,
             estimator: EstimatorParams::default(),
             vision: VisionParams::default(),
@@ -360,6 +366,18 @@ impl VehicleRunner {
         match event {
             SensorEvent::Imu(s) => self.on_imu(&s, step),
             SensorEvent::Gnss(f) => self.on_gnss(&f),
+            SensorEvent::Mag(m) => {
+                if self.params.use_mag {
+                    self.estimator.push_mag(&m)?;
+                }
+                Ok(())
+            }
+            SensorEvent::Baro(b) => {
+                if self.params.use_baro {
+                    self.estimator.push_baro(&b)?;
+                }
+                Ok(())
+            }
             SensorEvent::Camera(frame) => {
                 self.on_camera(frame, step);
                 Ok(())

@@ -13,7 +13,9 @@ use std::time::{Duration, Instant};
 
 use tokio::sync::{mpsc, oneshot};
 use tracing::{Span, debug, info_span, warn};
-use uavnav_core::{CameraFrame, GnssFix, ImuSample, SensorEvent, VehicleConfig};
+use uavnav_core::{
+    BaroSample, CameraFrame, GnssFix, ImuSample, MagSample, SensorEvent, VehicleConfig,
+};
 
 use crate::config::VehiclesConfig;
 use crate::engine::{Engine, EngineStep, SharedFactory, VisionResult, VisionWork};
@@ -69,31 +71,44 @@ pub enum Input {
     Imu(ImuSample),
     /// GNSS fix.
     Gnss(GnssFix),
+    /// Magnetometer sample.
+    Mag(MagSample),
+    /// Barometer sample.
+    Baro(BaroSample),
     /// Camera frame.
     Camera(CameraFrame),
 }
 
 impl Input {
-    fn t_ns(&self) -> i64 {
+    /// The sensor time, ns.
+    pub fn t_ns(&self) -> i64 {
         match self {
             Input::Imu(s) => s.t_ns,
             Input::Gnss(g) => g.t_ns,
+            Input::Mag(m) => m.t_ns,
+            Input::Baro(b) => b.t_ns,
             Input::Camera(c) => c.t_ns,
         }
     }
 
-    fn into_event(self) -> SensorEvent {
+    /// The estimator's event.
+    pub fn into_event(self) -> SensorEvent {
         match self {
             Input::Imu(s) => SensorEvent::Imu(s),
             Input::Gnss(g) => SensorEvent::Gnss(g),
+            Input::Mag(m) => SensorEvent::Mag(m),
+            Input::Baro(b) => SensorEvent::Baro(b),
             Input::Camera(c) => SensorEvent::Camera(c),
         }
     }
 
-    fn kind(&self) -> InputKind {
+    /// The kind (its value is the tie rank of `SensorEvent::rank`).
+    pub fn kind(&self) -> InputKind {
         match self {
             Input::Imu(_) => InputKind::Imu,
             Input::Gnss(_) => InputKind::Gnss,
+            Input::Mag(_) => InputKind::Mag,
+            Input::Baro(_) => InputKind::Baro,
             Input::Camera(_) => InputKind::Camera,
         }
     }
@@ -421,7 +436,7 @@ impl Actor {
                     return;
                 }
             }
-            Input::Gnss(_) => {}
+            Input::Gnss(_) | Input::Mag(_) | Input::Baro(_) => {}
         }
         match self
             .engine

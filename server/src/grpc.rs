@@ -19,7 +19,7 @@ use uavnav_proto::v1::uav_nav_server::UavNav;
 
 use crate::hub::PoseBatch;
 use crate::ingest::{Ingestor, Payload};
-use crate::metrics::{Kind, Outcome, Transport};
+use crate::metrics::{Cause, Kind, Outcome, Transport};
 use crate::validate;
 
 /// Outgoing message queue of one watch stream.
@@ -107,6 +107,8 @@ fn envelope_kind(e: &pb::SensorEnvelope) -> Option<Payload<'_>> {
     Some(match e.payload.as_ref()? {
         P::Imu(b) => Payload::Imu(b),
         P::Gnss(g) => Payload::Gnss(g),
+        P::Mag(m) => Payload::Mag(m),
+        P::Baro(b) => Payload::Baro(b),
         P::Camera(c) => Payload::Camera(c),
         P::Config(c) => Payload::Config(c),
     })
@@ -116,15 +118,12 @@ async fn ack_envelope(ingestor: &Ingestor, e: pb::SensorEnvelope) -> pb::IngestA
     let verdict = match envelope_kind(&e) {
         Some(p) => ingestor.submit(Transport::Grpc, &e.vehicle_id, p).await,
         None => {
-            ingestor.registry().ctx().metrics.input(
-                Transport::Grpc,
-                Kind::Malformed,
-                Outcome::Invalid,
-                1,
-            );
+            let metrics = &ingestor.registry().ctx().metrics;
+            metrics.input(Transport::Grpc, Kind::Malformed, Outcome::Invalid, 1);
+            metrics.refuse(Transport::Grpc, Kind::Malformed, Cause::Missing);
             crate::ingest::Verdict {
                 status: pb::IngestStatus::InvalidArgument,
-                reason: "payload: required (imu, gnss, camera or config)".into(),
+                reason: "payload: required (imu, gnss, mag, baro, camera or config)".into(),
             }
         }
     };
@@ -326,12 +325,9 @@ impl UavNav for UavNavService {
                     Some(Err(status)) => {
                         let status = remap_decode_status(status);
                         if status.code() == tonic::Code::InvalidArgument {
-                            ingestor.registry().ctx().metrics.input(
-                                Transport::Grpc,
-                                Kind::Malformed,
-                                Outcome::Invalid,
-                                1,
-                            );
+                            let metrics = &ingestor.registry().ctx().metrics;
+                            metrics.input(Transport::Grpc, Kind::Malformed, Outcome::Invalid, 1);
+                            metrics.refuse(Transport::Grpc, Kind::Malformed, Cause::Malformed);
                         }
                         let _ = tx.send(Err(status)).await;
                         break;

@@ -6,7 +6,16 @@ use std::time::Instant;
 use uavnav_proto::v1 as pb;
 
 use crate::engine::EngineHealth;
-use crate::vehicle::{VehicleShared, VehicleStats, wall_ns};
+use crate::vehicle::{INPUT_KINDS, InputKind, VehicleShared, VehicleStats, wall_ns};
+
+/// The kinds in the order of [`HealthWindow`]'s counts.
+const KINDS: [InputKind; INPUT_KINDS] = [
+    InputKind::Imu,
+    InputKind::Gnss,
+    InputKind::Mag,
+    InputKind::Baro,
+    InputKind::Camera,
+];
 
 /// Latency samples kept per period (a uniform subsample beyond it keeps memory flat).
 const MAX_LATENCY_SAMPLES: usize = 4096;
@@ -15,7 +24,7 @@ const MAX_LATENCY_SAMPLES: usize = 4096;
 #[derive(Debug)]
 pub struct HealthWindow {
     since: Instant,
-    counts_at_start: [u64; 3],
+    counts_at_start: [u64; INPUT_KINDS],
     latencies_s: Vec<f64>,
     latency_seen: u64,
     /// Vision quality is kept from report to report (a camera at 1 Hz must not flicker).
@@ -27,7 +36,7 @@ impl HealthWindow {
     pub fn new(now: Instant) -> Self {
         Self {
             since: now,
-            counts_at_start: [0; 3],
+            counts_at_start: [0; INPUT_KINDS],
             latencies_s: Vec::new(),
             latency_seen: 0,
             last_vision: None,
@@ -55,18 +64,20 @@ impl HealthWindow {
         now: Instant,
     ) -> pb::VehicleHealth {
         let st = &shared.stats;
-        let counts = [
-            VehicleStats::get(&st.imu),
-            VehicleStats::get(&st.gnss),
-            VehicleStats::get(&st.camera),
-        ];
+        let counts = KINDS.map(|k| VehicleStats::get(st.of(k)));
         let dt_s = now.duration_since(self.since).as_secs_f64().max(1e-6);
-        let rate = |i: usize| counts[i].saturating_sub(self.counts_at_start[i]) as f64 / dt_s;
-        let input_rates = pb::SensorRates {
-            imu_hz: rate(0),
-            gnss_hz: rate(1),
-            camera_hz: rate(2),
+        let rate = |k: InputKind| {
+            let i = k as usize;
+            counts[i].saturating_sub(self.counts_at_start[i]) as f64 / dt_s
         };
+        let input_rates = pb::SensorRates {
+            imu_hz: rate(InputKind::Imu),
+            gnss_hz: rate(InputKind::Gnss),
+            camera_hz: rate(InputKind::Camera),
+            mag_hz: rate(InputKind::Mag),
+            baro_hz: rate(InputKind::Baro),
+        };
+        let count = |k: InputKind| counts[k as usize];
         if engine.vision.is_some() {
             self.last_vision = engine.vision;
         }
@@ -86,6 +97,11 @@ impl HealthWindow {
                 dropped: VehicleStats::get(&st.dropped),
                 gnss_gate_rejections: engine.gnss_gate_rejections,
                 vision_gate_rejections: engine.vision_gate_rejections,
+                imu_accepted: count(InputKind::Imu),
+                gnss_accepted: count(InputKind::Gnss),
+                mag_accepted: count(InputKind::Mag),
+                baro_accepted: count(InputKind::Baro),
+                camera_accepted: count(InputKind::Camera),
             }),
             vision: if shared.camera().is_some() {
                 self.last_vision
@@ -135,14 +151,22 @@ mod tests {
         let mut w = HealthWindow::new(t0);
         VehicleStats::add(&shared.stats.imu, 200);
         VehicleStats::add(&shared.stats.gnss, 5);
+        VehicleStats::add(&shared.stats.mag, 50);
+        VehicleStats::add(&shared.stats.baro, 20);
         let r = w.report(
             &shared,
             &EngineHealth::default(),
             0,
-            t0 + std::time::Duration::from_secs(1),
+            t0 + std::time::Duration::from_secs(2),
         );
         let rates = r.input_rates.unwrap();
-        assert!((rates.imu_hz - 200.0).abs() < 1e-9 && (rates.gnss_hz - 5.0).abs() < 1e-9);
-        assert_eq!(r.counters.unwrap().accepted, 205);
+        assert!((rates.imu_hz - 100.0).abs() < 1e-9 && (rates.gnss_hz - 2.5).abs() < 1e-9);
+        assert!((rates.mag_hz - 25.0).abs() < 1e-9 && (rates.baro_hz - 10.0).abs() < 1e-9);
+        let c = r.counters.unwrap();
+        assert_eq!(c.accepted, 275);
+        assert_eq!(
+            (c.imu_accepted, c.gnss_accepted, c.mag_accepted, c.baro_accepted),
+            (200, 5, 50, 20)
+        );
     }
 }

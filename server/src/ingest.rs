@@ -20,6 +20,10 @@ pub enum Payload<'a> {
     Imu(&'a pb::ImuBatch),
     /// GNSS fix.
     Gnss(&'a pb::GnssFix),
+    /// Magnetometer sample.
+    Mag(&'a pb::MagSample),
+    /// Barometer sample.
+    Baro(&'a pb::BaroSample),
     /// Camera frame.
     Camera(&'a pb::CameraFrame),
     /// Vehicle configuration.
@@ -31,6 +35,8 @@ impl Payload<'_> {
         match self {
             Payload::Imu(_) => Kind::Imu,
             Payload::Gnss(_) => Kind::Gnss,
+            Payload::Mag(_) => Kind::Mag,
+            Payload::Baro(_) => Kind::Baro,
             Payload::Camera(_) => Kind::Camera,
             Payload::Config(_) => Kind::Config,
         }
@@ -61,6 +67,17 @@ impl From<Rejection> for Verdict {
             status: r.status,
             reason: r.reason,
         }
+    }
+}
+
+/// The metric kind of an input kind.
+fn metric_kind(k: InputKind) -> Kind {
+    match k {
+        InputKind::Imu => Kind::Imu,
+        InputKind::Gnss => Kind::Gnss,
+        InputKind::Mag => Kind::Mag,
+        InputKind::Baro => Kind::Baro,
+        InputKind::Camera => Kind::Camera,
     }
 }
 
@@ -107,6 +124,8 @@ impl Ingestor {
         let verdict = match self.route(transport, id, payload).await {
             Ok(v) => v,
             Err(r) => {
+                self.registry.ctx().metrics.refuse(transport, kind, r.cause);
+                tracing::debug!(vehicle = %id, ?kind, reason = %r.reason, "input refused");
                 if let Some(h) = self.registry.get(id) {
                     let st = &h.shared.stats;
                     let counter = match r.status {
@@ -143,7 +162,21 @@ impl Ingestor {
         validate::vehicle_id(id)?;
         match payload {
             Payload::Imu(b) => self.imu(transport, id, b).await,
-            Payload::Gnss(g) => self.gnss(transport, id, g).await,
+            Payload::Gnss(g) => {
+                let fix = validate::gnss_fix(g)?;
+                self.single(transport, id, Input::Gnss(fix), |live| live.gnss(id, g))
+                    .await
+            }
+            Payload::Mag(m) => {
+                let sample = validate::mag_sample(m)?;
+                self.single(transport, id, Input::Mag(sample), |live| live.mag(id, m))
+                    .await
+            }
+            Payload::Baro(b) => {
+                let sample = validate::baro_sample(b)?;
+                self.single(transport, id, Input::Baro(sample), |_| {})
+                    .await
+            }
             Payload::Camera(c) => self.camera(transport, id, c).await,
             Payload::Config(c) => self
                 .configure(id, c, false)
@@ -204,41 +237,44 @@ impl Ingestor {
         Ok(Verdict::accepted(remark))
     }
 
-    async fn gnss(
+    /// Gates and routes one validated single-sample input (GNSS fix, magnetometer or barometer
+    /// sample) and shows it on the live view when accepted.
+    async fn single(
         &self,
         transport: Transport,
         id: &str,
-        g: &pb::GnssFix,
+        input: Input,
+        show: impl FnOnce(&crate::live::LiveTap),
     ) -> Result<Verdict, Rejection> {
-        let fix = validate::gnss_fix(g)?;
+        let kind = input.kind();
         let h = self.vehicle(id)?;
         let ctx = self.registry.ctx();
+        let wall = wall_ns();
         h.shared
             .admit(
-                InputKind::Gnss,
-                fix.t_ns,
-                wall_ns(),
+                kind,
+                input.t_ns(),
+                wall,
                 (ctx.window_ns(), ctx.max_future_ns()),
-                || "gnss".into(),
+                || kind.field().into(),
             )
             .map_err(|r| gate_rejection(Some(r)))?;
-        let wall = wall_ns();
         self.send(
             &h,
             id,
             Msg::Data(vec![Stamped {
-                input: Input::Gnss(fix),
+                input,
                 wall_ns: wall,
                 at: Instant::now(),
             }]),
         )
         .await?;
-        VehicleStats::add(&h.shared.stats.gnss, 1);
+        VehicleStats::add(h.shared.stats.of(kind), 1);
         if let Some(live) = &self.live {
-            live.gnss(id, g);
+            show(live);
         }
         ctx.metrics
-            .input(transport, Kind::Gnss, Outcome::Accepted, 1);
+            .input(transport, metric_kind(kind), Outcome::Accepted, 1);
         h.shared
             .last_input_wall_ns
             .store(wall, std::sync::atomic::Ordering::Relaxed);
@@ -407,8 +443,8 @@ fn admit_imu(
             }),
             Err(r) => {
                 match &r {
-                    GateRefusal::Late(_) => out.late += 1,
                     GateRefusal::Future(_) => out.future += 1,
+                    _ => out.late += 1,
                 }
                 out.first_refusal.get_or_insert(r);
             }
@@ -425,21 +461,22 @@ fn registry_rejection(e: RegistryError) -> Rejection {
 }
 
 fn refusal_text(r: &GateRefusal) -> &str {
-    match r {
-        GateRefusal::Late(s) | GateRefusal::Future(s) => s,
-    }
+    r.text()
 }
 
 fn gate_rejection(r: Option<GateRefusal>) -> Rejection {
-    match r {
-        Some(GateRefusal::Late(reason)) => Rejection {
-            status: pb::IngestStatus::Late,
-            reason,
-        },
-        Some(GateRefusal::Future(reason)) => Rejection {
-            status: pb::IngestStatus::OutOfRange,
-            reason,
-        },
-        None => Rejection::invalid("no sample accepted"),
-    }
+    use crate::metrics::Cause;
+    let (status, cause, reason) = match r {
+        Some(GateRefusal::Late(reason)) => (pb::IngestStatus::Late, Cause::Late, reason),
+        Some(GateRefusal::Duplicate(reason)) => {
+            (pb::IngestStatus::Late, Cause::Duplicate, reason)
+        }
+        // A sensor whose clock runs backwards is sending bad data, not late data.
+        Some(GateRefusal::Backwards(reason)) => {
+            (pb::IngestStatus::InvalidArgument, Cause::Backwards, reason)
+        }
+        Some(GateRefusal::Future(reason)) => (pb::IngestStatus::OutOfRange, Cause::Future, reason),
+        None => return Rejection::invalid("no sample accepted"),
+    };
+    Rejection::new(status, cause, reason)
 }

@@ -1,5 +1,7 @@
 //! Foxglove live view: a Foxglove WebSocket server (the `foxglove` crate's) that shows each
-//! vehicle's pose, path, GNSS fix and camera image while they stream. `uavnavd --foxglove-addr`
+//! vehicle's pose, path, GNSS fix, magnetometer vector and camera image while they stream (the
+//! barometer is not shown: Foxglove has no schema for a scalar pressure, and a Plot panel of the
+//! recording's `/uavnav/{id}/baro` topic shows it). `uavnavd --foxglove-addr`
 //! feeds it from the service (every input transport, every pose); `uavnav watch --foxglove` feeds
 //! it from what a client watches.
 //!
@@ -10,7 +12,8 @@
 //! | `/vehicle/{id}/pose` | `foxglove.PoseInFrame` | the estimate (`nav_from_body`) in frame `ned` |
 //! | `/vehicle/{id}/path` | `foxglove.PosesInFrame` | its path: one pose per [`PATH_SPACING_NS`] of sensor time, the last [`PATH_MAX_POSES`] |
 //! | `/vehicle/{id}/estimate_fix` | `foxglove.LocationFix` | the estimate for the Map panel |
-//! | `/vehicle/{id}/gnss` | `foxglove.LocationFix` | GNSS fixes as received |
+//! | `/vehicle/{id}/gnss` | `foxglove.LocationFix` | GNSS fixes as received (without velocity when the receiver gives none) |
+//! | `/vehicle/{id}/mag` | `foxglove.Vector3` | magnetometer samples as received, µT, magnetometer frame (for a Plot panel; the schema has no timestamp, so log time = wall clock at publication) |
 //! | `/vehicle/{id}/camera` | `foxglove.CompressedImage` | camera frames as received (JPEG/PNG) |
 //!
 //! Frame `ned` is one local NED frame for the whole view, at the first position it sees, so the
@@ -24,7 +27,9 @@
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 
-use foxglove::messages::{CompressedImage, LocationFix, Pose, PoseInFrame, PosesInFrame};
+use foxglove::messages::{
+    CompressedImage, LocationFix, Pose, PoseInFrame, PosesInFrame, Vector3 as FoxVector3,
+};
 use foxglove::{Channel, Context, WebSocketServer, WebSocketServerHandle};
 use prometheus_client::metrics::counter::Counter;
 use tokio::sync::mpsc;
@@ -60,6 +65,7 @@ pub enum LiveError {
 enum LiveMsg {
     Poses(Arc<crate::hub::PoseBatch>),
     Gnss(Arc<str>, pb::GnssFix),
+    Mag(Arc<str>, pb::MagSample),
     Camera(Arc<str>, pb::CameraFrame),
 }
 
@@ -93,6 +99,11 @@ impl LiveTap {
     /// Shows a GNSS fix of `vehicle_id`.
     pub fn gnss(&self, vehicle_id: &str, f: &pb::GnssFix) {
         self.send(LiveMsg::Gnss(vehicle_id.into(), *f));
+    }
+
+    /// Shows a magnetometer sample of `vehicle_id`.
+    pub fn mag(&self, vehicle_id: &str, m: &pb::MagSample) {
+        self.send(LiveMsg::Mag(vehicle_id.into(), *m));
     }
 
     /// Shows a camera frame of `vehicle_id`.
@@ -193,6 +204,7 @@ async fn run(mut scene: Scene, mut rx: mpsc::Receiver<LiveMsg>) -> Scene {
                 }
             }
             LiveMsg::Gnss(id, f) => scene.gnss(&id, &f),
+            LiveMsg::Mag(id, m) => scene.mag(&id, &m),
             LiveMsg::Camera(id, f) => scene.camera(&id, f),
         }
     }
@@ -205,6 +217,7 @@ struct VehicleView {
     path: Channel<PosesInFrame>,
     estimate_fix: Channel<LocationFix>,
     gnss: Channel<LocationFix>,
+    mag: Channel<FoxVector3>,
     camera: Channel<CompressedImage>,
     path_poses: VecDeque<Pose>,
     last_path_t_ns: Option<i64>,
@@ -235,6 +248,7 @@ impl Scene {
                 path: ctx.channel_builder(topic("path")).build(),
                 estimate_fix: ctx.channel_builder(topic("estimate_fix")).build(),
                 gnss: ctx.channel_builder(topic("gnss")).build(),
+                mag: ctx.channel_builder(topic("mag")).build(),
                 camera: ctx.channel_builder(topic("camera")).build(),
                 path_poses: VecDeque::new(),
                 last_path_t_ns: None,
@@ -288,6 +302,16 @@ impl Scene {
         if let Ok(fix) = foxglove_conv::location_fix_from_wire(f) {
             self.vehicle(id).gnss.log(&fix);
         }
+    }
+
+    fn mag(&mut self, id: &str, m: &pb::MagSample) {
+        // µT: the Plot panel's axis then reads 20-60 for the Earth's field instead of 2e-5.
+        const UT_PER_T: f64 = 1e6;
+        self.vehicle(id).mag.log(&FoxVector3 {
+            x: m.field_x_t * UT_PER_T,
+            y: m.field_y_t * UT_PER_T,
+            z: m.field_z_t * UT_PER_T,
+        });
     }
 
     fn camera(&mut self, id: &str, f: pb::CameraFrame) {

@@ -28,6 +28,10 @@ pub enum Kind {
     Imu,
     /// GNSS fix.
     Gnss,
+    /// Magnetometer sample.
+    Mag,
+    /// Barometer sample.
+    Baro,
     /// Camera frame.
     Camera,
     /// Vehicle configuration.
@@ -55,6 +59,47 @@ pub enum Outcome {
     Exhausted,
 }
 
+/// Why an input was refused: the `reason` label of `uavnav_inputs_refused_total` (the ack and the
+/// debug log carry the full text naming the field).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Cause {
+    /// A number is NaN or infinite.
+    NotFinite,
+    /// A number is outside its plausible range (an absurd magnitude).
+    OutOfRange,
+    /// A required field is absent.
+    Missing,
+    /// An unknown or unspecified enum value.
+    UnknownEnum,
+    /// Any other invalid content (bad id, corrupt image, unordered batch...).
+    Invalid,
+    /// A sensor's time went backwards.
+    Backwards,
+    /// Older than the reorder window.
+    Late,
+    /// The same time as the previous sample of its kind.
+    Duplicate,
+    /// Too far ahead of the vehicle's clock.
+    Future,
+    /// Not applicable in the vehicle's state (a frame without a camera configured).
+    Precondition,
+    /// A limit was reached (queue, vehicles, size).
+    Exhausted,
+    /// Undecodable protobuf.
+    Malformed,
+}
+
+/// Why the recorder dropped a message: the `reason` label of `uavnav_record_dropped_total`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum RecordDrop {
+    /// The byte-bounded queue to the writer was full (the writer is slower than the input).
+    QueueFull,
+    /// The output feed (poses, health) lagged behind the hub's ring.
+    Lagged,
+    /// Writing failed (a full disk, permissions): the file is given up and retried later.
+    WriteError,
+}
+
 /// Label values are the lowercase variant names (Prometheus convention).
 macro_rules! lowercase_label {
     ($t:ty { $($v:ident => $s:literal),* $(,)? }) => {
@@ -68,7 +113,22 @@ macro_rules! lowercase_label {
 }
 
 lowercase_label!(Transport { Grpc => "grpc", Zenoh => "zenoh" });
-lowercase_label!(Kind { Imu => "imu", Gnss => "gnss", Camera => "camera", Config => "config", Malformed => "malformed" });
+lowercase_label!(Kind { Imu => "imu", Gnss => "gnss", Mag => "mag", Baro => "baro", Camera => "camera", Config => "config", Malformed => "malformed" });
+lowercase_label!(Cause {
+    NotFinite => "not_finite",
+    OutOfRange => "out_of_range",
+    Missing => "missing",
+    UnknownEnum => "unknown_enum",
+    Invalid => "invalid",
+    Backwards => "backwards",
+    Late => "late",
+    Duplicate => "duplicate",
+    Future => "future",
+    Precondition => "precondition",
+    Exhausted => "exhausted",
+    Malformed => "malformed",
+});
+lowercase_label!(RecordDrop { QueueFull => "queue_full", Lagged => "lagged", WriteError => "write_error" });
 lowercase_label!(Outcome {
     Accepted => "accepted",
     Invalid => "invalid",
@@ -90,6 +150,24 @@ pub struct InputLabels {
     pub outcome: Outcome,
 }
 
+/// Labels of `uavnav_inputs_refused_total`.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, EncodeLabelSet)]
+pub struct RefusedLabels {
+    /// Transport.
+    pub transport: Transport,
+    /// Kind.
+    pub kind: Kind,
+    /// Why.
+    pub reason: Cause,
+}
+
+/// Labels of `uavnav_record_dropped_total`.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, EncodeLabelSet)]
+pub struct RecordDropLabels {
+    /// Why.
+    pub reason: RecordDrop,
+}
+
 /// Every metric of the service.
 #[derive(Debug, Clone)]
 pub struct Metrics {
@@ -97,6 +175,16 @@ pub struct Metrics {
     pub registry: Arc<Registry>,
     /// Inputs by transport, kind and outcome (IMU counted per sample).
     pub inputs: Family<InputLabels, Counter>,
+    /// Refused input messages by transport, kind and reason (a refused IMU batch counts once).
+    pub refused: Family<RefusedLabels, Counter>,
+    /// Messages the recorder dropped, by reason.
+    pub record_dropped: Family<RecordDropLabels, Counter>,
+    /// Messages the recorder wrote.
+    pub record_written: Counter,
+    /// Bytes waiting in the recorder's queue.
+    pub record_queue_bytes: Gauge,
+    /// Recording files closed (rotation or shutdown).
+    pub record_files: Counter,
     /// Poses published.
     pub poses: Counter,
     /// Health reports published.
@@ -135,6 +223,11 @@ impl Metrics {
     pub fn new() -> Self {
         let mut registry = Registry::with_prefix("uavnav");
         let inputs = Family::<InputLabels, Counter>::default();
+        let refused = Family::<RefusedLabels, Counter>::default();
+        let record_dropped = Family::<RecordDropLabels, Counter>::default();
+        let record_written = Counter::default();
+        let record_queue_bytes = Gauge::default();
+        let record_files = Counter::default();
         let poses = Counter::default();
         let health_reports = Counter::default();
         let vehicles = Gauge::default();
@@ -154,6 +247,31 @@ impl Metrics {
             "inputs",
             "Sensor inputs by transport, kind and outcome",
             inputs.clone(),
+        );
+        registry.register(
+            "inputs_refused",
+            "Refused input messages by transport, kind and reason",
+            refused.clone(),
+        );
+        registry.register(
+            "record_dropped",
+            "Messages the recorder dropped (queue full, output lag, write error)",
+            record_dropped.clone(),
+        );
+        registry.register(
+            "record_written",
+            "Messages the recorder wrote",
+            record_written.clone(),
+        );
+        registry.register(
+            "record_queue_bytes",
+            "Bytes waiting in the recorder's queue",
+            record_queue_bytes.clone(),
+        );
+        registry.register(
+            "record_files",
+            "Recording files closed",
+            record_files.clone(),
         );
         registry.register("poses", "Pose estimates published", poses.clone());
         registry.register(
@@ -225,6 +343,11 @@ impl Metrics {
         Self {
             registry: Arc::new(registry),
             inputs,
+            refused,
+            record_dropped,
+            record_written,
+            record_queue_bytes,
+            record_files,
             poses,
             health_reports,
             vehicles,
@@ -251,6 +374,24 @@ impl Metrics {
                 kind,
                 outcome,
             })
+            .inc_by(n);
+    }
+
+    /// Counts one refused message.
+    pub fn refuse(&self, transport: Transport, kind: Kind, reason: Cause) {
+        self.refused
+            .get_or_create(&RefusedLabels {
+                transport,
+                kind,
+                reason,
+            })
+            .inc();
+    }
+
+    /// Counts `n` messages the recorder dropped.
+    pub fn record_dropped(&self, reason: RecordDrop, n: u64) {
+        self.record_dropped
+            .get_or_create(&RecordDropLabels { reason })
             .inc_by(n);
     }
 

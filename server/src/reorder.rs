@@ -1,8 +1,9 @@
 //! A bounded reorder window: items go in in any order and come out in timestamp order once the
 //! newest timestamp seen is more than the window ahead of them.
 //!
-//! Ties in time are broken by kind (IMU, then GNSS, then camera: a measurement at `t` is fused after
-//! the IMU has propagated to `t`) and then by arrival order, so the output is deterministic.
+//! Ties in time are broken by kind (`SensorEvent::rank`: IMU, GNSS, magnetometer, barometer, camera;
+//! a measurement at `t` is fused after the IMU has propagated to `t`, and the dataset reader's merge
+//! breaks ties the same way) and then by arrival order, so the output is deterministic.
 
 use std::collections::VecDeque;
 
@@ -127,14 +128,30 @@ mod tests {
 
     #[test]
     fn ties_go_by_kind_then_arrival() {
+        use uavnav_core::{BaroSample, MagSample, SensorEvent};
+        let mag = SensorEvent::Mag(MagSample {
+            t_ns: 7,
+            field_t: nalgebra::Vector3::zeros(),
+        });
+        let baro = SensorEvent::Baro(BaroSample {
+            t_ns: 7,
+            pressure_pa: 1e5,
+            temperature_degc: None,
+        });
         let mut b = ReorderBuffer::new(0, 100);
-        b.push(7, 2, "cam").unwrap();
+        b.push(7, 4, "cam").unwrap();
+        b.push(7, baro.rank(), "baro").unwrap();
         b.push(7, 0, "imu").unwrap();
+        b.push(7, mag.rank(), "mag").unwrap();
         b.push(7, 1, "gnss").unwrap();
         let out: Vec<_> = std::iter::from_fn(|| b.pop_first())
             .map(|(_, x)| x)
             .collect();
-        assert_eq!(out, ["imu", "gnss", "cam"]);
+        assert_eq!(out, ["imu", "gnss", "mag", "baro", "cam"]);
+        // The service's kinds carry the same ranks.
+        use crate::vehicle::InputKind;
+        assert_eq!(InputKind::Mag as u8, mag.rank());
+        assert_eq!(InputKind::Baro as u8, baro.rank());
     }
 
     #[test]

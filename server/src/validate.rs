@@ -6,9 +6,13 @@
 //! this module adds what only the service knows: vehicle ids, batch and image size limits, image
 //! headers against the vehicle's configured camera, and the status of each refusal.
 
-use uavnav_core::{CameraFrame, GnssFix, ImageFormat, ImuSample, VehicleConfig};
+use uavnav_core::{
+    BaroSample, CameraFrame, GnssFix, ImageFormat, ImuSample, MagSample, VehicleConfig,
+};
 use uavnav_proto::convert::{self, ConvertError};
 use uavnav_proto::v1 as pb;
+
+use crate::metrics::Cause;
 
 /// Most IMU samples in one batch.
 pub const MAX_IMU_BATCH: usize = 10_000;
@@ -23,31 +27,37 @@ pub struct Rejection {
     pub status: pb::IngestStatus,
     /// Reason, starting with the field path.
     pub reason: String,
+    /// The reason's class (the `reason` label of `uavnav_inputs_refused_total`).
+    pub cause: Cause,
 }
 
 impl Rejection {
+    /// A refusal with an explicit status and cause.
+    pub fn new(status: pb::IngestStatus, cause: Cause, reason: impl Into<String>) -> Self {
+        Self {
+            status,
+            reason: reason.into(),
+            cause,
+        }
+    }
+
     /// INVALID_ARGUMENT.
     pub fn invalid(reason: impl Into<String>) -> Self {
-        Self {
-            status: pb::IngestStatus::InvalidArgument,
-            reason: reason.into(),
-        }
+        Self::new(pb::IngestStatus::InvalidArgument, Cause::Invalid, reason)
     }
 
     /// FAILED_PRECONDITION.
     pub fn precondition(reason: impl Into<String>) -> Self {
-        Self {
-            status: pb::IngestStatus::FailedPrecondition,
-            reason: reason.into(),
-        }
+        Self::new(
+            pb::IngestStatus::FailedPrecondition,
+            Cause::Precondition,
+            reason,
+        )
     }
 
     /// RESOURCE_EXHAUSTED.
     pub fn exhausted(reason: impl Into<String>) -> Self {
-        Self {
-            status: pb::IngestStatus::ResourceExhausted,
-            reason: reason.into(),
-        }
+        Self::new(pb::IngestStatus::ResourceExhausted, Cause::Exhausted, reason)
     }
 
     /// The matching gRPC status (for unary calls).
@@ -89,7 +99,30 @@ pub fn vehicle_id(id: &str) -> Check<()> {
 
 /// A conversion error from the wire contract, with the enclosing field's name in front.
 fn invalid_in(parent: &str, e: ConvertError) -> Rejection {
-    Rejection::invalid(e.within(parent).to_string())
+    let cause = match &e {
+        ConvertError::Missing { .. } => Cause::Missing,
+        ConvertError::NotFinite { .. } => Cause::NotFinite,
+        ConvertError::OutOfRange { .. } => Cause::OutOfRange,
+        ConvertError::UnknownEnum { .. } => Cause::UnknownEnum,
+        ConvertError::Invalid { .. } => Cause::Invalid,
+    };
+    Rejection::new(
+        pb::IngestStatus::InvalidArgument,
+        cause,
+        e.within(parent).to_string(),
+    )
+}
+
+/// A negative sensor time (MCAP recordings and the estimator's clocks are unsigned from 0).
+fn negative_time(field: &str, t_ns: i64) -> Check<()> {
+    if t_ns < 0 {
+        return Err(Rejection::new(
+            pb::IngestStatus::InvalidArgument,
+            Cause::OutOfRange,
+            format!("{field}.t_ns: {t_ns} is negative"),
+        ));
+    }
+    Ok(())
 }
 
 /// Validates an IMU batch (finite, plausible, strictly increasing times) and converts it.
@@ -116,13 +149,24 @@ pub fn imu_batch(b: &pb::ImuBatch) -> Check<Vec<ImuSample>> {
 /// Validates a GNSS fix and converts it.
 pub fn gnss_fix(g: &pb::GnssFix) -> Check<GnssFix> {
     let fix = GnssFix::try_from(g).map_err(|e| invalid_in("gnss", e))?;
-    if fix.t_ns < 0 {
-        return Err(Rejection::invalid(format!(
-            "gnss.t_ns: {} is negative",
-            fix.t_ns
-        )));
-    }
+    negative_time("gnss", fix.t_ns)?;
     Ok(fix)
+}
+
+/// Validates a magnetometer sample (finite, each axis within the contract's plausible bound: a
+/// value in gauss or µT sent as tesla is refused) and converts it.
+pub fn mag_sample(m: &pb::MagSample) -> Check<MagSample> {
+    let s = MagSample::try_from(m).map_err(|e| invalid_in("mag", e))?;
+    negative_time("mag", s.t_ns)?;
+    Ok(s)
+}
+
+/// Validates a barometer sample (finite, pressure and temperature within the contract's plausible
+/// ranges: a value in hPa sent as Pa is refused) and converts it.
+pub fn baro_sample(b: &pb::BaroSample) -> Check<BaroSample> {
+    let s = BaroSample::try_from(b).map_err(|e| invalid_in("baro", e))?;
+    negative_time("baro", s.t_ns)?;
+    Ok(s)
 }
 
 /// What the service knows of a vehicle's camera, to check frames against.
@@ -306,6 +350,57 @@ mod tests {
             e.reason
         );
         assert_eq!(e.status, pb::IngestStatus::InvalidArgument);
+    }
+
+    #[test]
+    fn mag_and_baro_nan_and_absurd_values_name_the_field() {
+        let e = mag_sample(&pb::MagSample {
+            t_ns: 1,
+            field_x_t: f64::NAN,
+            ..Default::default()
+        })
+        .unwrap_err();
+        assert!(e.reason.starts_with("mag.field_x_t"), "{}", e.reason);
+        assert_eq!(e.cause, Cause::NotFinite);
+        // 45 µT sent in gauss-like units: absurd as tesla.
+        let e = mag_sample(&pb::MagSample {
+            t_ns: 1,
+            field_z_t: 0.45,
+            ..Default::default()
+        })
+        .unwrap_err();
+        assert_eq!(
+            (e.cause, e.status),
+            (Cause::OutOfRange, pb::IngestStatus::InvalidArgument)
+        );
+        assert!(mag_sample(&pb::MagSample {
+            t_ns: 1,
+            field_x_t: 2.2e-5,
+            field_z_t: 4.1e-5,
+            ..Default::default()
+        })
+        .is_ok());
+        // 1013 hPa sent as Pa.
+        let e = baro_sample(&pb::BaroSample {
+            t_ns: 1,
+            pressure_pa: 1013.0 * 1e-2,
+            temperature_degc: None,
+        })
+        .unwrap_err();
+        assert!(e.reason.starts_with("baro.pressure_pa"), "{}", e.reason);
+        let e = baro_sample(&pb::BaroSample {
+            t_ns: -5,
+            pressure_pa: 101_325.0,
+            temperature_degc: Some(20.0),
+        })
+        .unwrap_err();
+        assert!(e.reason.starts_with("baro.t_ns"), "{}", e.reason);
+        assert!(baro_sample(&pb::BaroSample {
+            t_ns: 5,
+            pressure_pa: 101_325.0,
+            temperature_degc: Some(20.0),
+        })
+        .is_ok());
     }
 
     #[test]

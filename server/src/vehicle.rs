@@ -9,16 +9,25 @@ use uavnav_proto::v1 as pb;
 
 use crate::validate::CameraSpec;
 
-/// Input kinds, in the order that breaks timestamp ties in the reorder window.
+/// Input kinds, in the order that breaks timestamp ties in the reorder window: the values are
+/// `SensorEvent::rank()` (IMU, GNSS, magnetometer, barometer, camera), the rule the dataset
+/// reader's merge follows too, so a recording and the service fuse ties alike.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum InputKind {
     /// IMU sample.
     Imu = 0,
     /// GNSS fix.
     Gnss = 1,
+    /// Magnetometer sample.
+    Mag = 2,
+    /// Barometer sample.
+    Baro = 3,
     /// Camera frame.
-    Camera = 2,
+    Camera = 4,
 }
+
+/// How many input kinds there are.
+pub const INPUT_KINDS: usize = 5;
 
 impl InputKind {
     /// Field name used in rejection reasons.
@@ -26,6 +35,8 @@ impl InputKind {
         match self {
             InputKind::Imu => "imu",
             InputKind::Gnss => "gnss",
+            InputKind::Mag => "mag",
+            InputKind::Baro => "baro",
             InputKind::Camera => "camera",
         }
     }
@@ -38,6 +49,10 @@ pub struct VehicleStats {
     pub imu: AtomicU64,
     /// Accepted GNSS fixes.
     pub gnss: AtomicU64,
+    /// Accepted magnetometer samples.
+    pub mag: AtomicU64,
+    /// Accepted barometer samples.
+    pub baro: AtomicU64,
     /// Accepted camera frames.
     pub camera: AtomicU64,
     /// Rejected as invalid (any transport).
@@ -63,17 +78,57 @@ impl VehicleStats {
 
     /// Accepted inputs of every kind.
     pub fn accepted(&self) -> u64 {
-        Self::get(&self.imu) + Self::get(&self.gnss) + Self::get(&self.camera)
+        Self::get(&self.imu)
+            + Self::get(&self.gnss)
+            + Self::get(&self.mag)
+            + Self::get(&self.baro)
+            + Self::get(&self.camera)
+    }
+
+    /// The accepted counter of one input kind.
+    pub fn of(&self, kind: InputKind) -> &AtomicU64 {
+        match kind {
+            InputKind::Imu => &self.imu,
+            InputKind::Gnss => &self.gnss,
+            InputKind::Mag => &self.mag,
+            InputKind::Baro => &self.baro,
+            InputKind::Camera => &self.camera,
+        }
     }
 }
 
 /// Why the time gate refused a sample.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum GateRefusal {
-    /// Older than the reorder window allows, or the same time as the previous sample of its kind.
+    /// Older than the reorder window allows.
     Late(String),
+    /// The same time as the previous sample of its kind.
+    Duplicate(String),
+    /// A magnetometer or barometer sample older than the previous one of its kind: the sensor's
+    /// clock went backwards.
+    Backwards(String),
     /// Too far ahead of the vehicle's newest sample.
     Future(String),
+}
+
+impl GateRefusal {
+    /// The reason text.
+    pub fn text(&self) -> &str {
+        match self {
+            GateRefusal::Late(s)
+            | GateRefusal::Duplicate(s)
+            | GateRefusal::Backwards(s)
+            | GateRefusal::Future(s) => s,
+        }
+    }
+}
+
+/// Whether a kind's samples must come in increasing time order. Magnetometer and barometer samples
+/// arrive one per message from one sensor, so an older sample means the sensor's clock jumped back
+/// (the estimator would refuse it silently behind the window); IMU batches, fixes and frames may
+/// arrive out of order within the reorder window (several links, retransmissions).
+fn strictly_ordered(kind: InputKind) -> bool {
+    matches!(kind, InputKind::Mag | InputKind::Baro)
 }
 
 /// Per-vehicle timestamp bookkeeping done at ingest, so a sender learns at once (in its ack)
@@ -83,7 +138,7 @@ pub struct TimeGate {
     newest_ns: Option<i64>,
     /// Service wall clock when `newest_ns` was admitted.
     newest_wall_ns: i64,
-    last_ns: [Option<i64>; 3],
+    last_ns: [Option<i64>; INPUT_KINDS],
 }
 
 impl TimeGate {
@@ -124,10 +179,19 @@ impl TimeGate {
                 )));
             }
         }
-        if self.last_ns[kind as usize] == Some(t_ns) {
-            return Err(GateRefusal::Late(format!(
+        let last = self.last_ns[kind as usize];
+        if last == Some(t_ns) {
+            return Err(GateRefusal::Duplicate(format!(
                 "{}: duplicate t_ns {t_ns}",
                 field()
+            )));
+        }
+        if let Some(last) = last.filter(|&l| strictly_ordered(kind) && t_ns < l) {
+            return Err(GateRefusal::Backwards(format!(
+                "{}: time went backwards: t_ns {t_ns} is {:.6} s before the previous {} sample ({last})",
+                field(),
+                (last - t_ns) as f64 * 1e-9,
+                kind.field()
             )));
         }
         self.last_ns[kind as usize] = Some(t_ns);
@@ -259,7 +323,7 @@ mod tests {
         );
         assert!(matches!(
             g.admit(InputKind::Imu, 1_000, 0, w, f, || "imu".into()),
-            Err(GateRefusal::Late(_))
+            Err(GateRefusal::Duplicate(_))
         ));
         assert!(
             g.admit(InputKind::Gnss, 950, 0, w, f, || "gnss".into())
@@ -278,6 +342,29 @@ mod tests {
             g.admit(InputKind::Imu, 1_900, 0, w, f, || "imu".into())
                 .is_ok()
         );
+    }
+
+    #[test]
+    fn gate_refuses_mag_and_baro_going_backwards_but_not_imu() {
+        let mut g = TimeGate::default();
+        let (w, f) = (100, 1_000);
+        for kind in [InputKind::Mag, InputKind::Baro, InputKind::Imu] {
+            assert!(g.admit(kind, 1_000, 0, w, f, || "x".into()).is_ok());
+        }
+        let e = g.admit(InputKind::Mag, 990, 0, w, f, || "mag".into());
+        assert!(
+            matches!(e, Err(GateRefusal::Backwards(ref m)) if m.starts_with("mag: time went backwards")),
+            "{e:?}"
+        );
+        assert!(matches!(
+            g.admit(InputKind::Baro, 999, 0, w, f, || "baro".into()),
+            Err(GateRefusal::Backwards(_))
+        ));
+        assert!(
+            g.admit(InputKind::Imu, 990, 0, w, f, || "imu".into()).is_ok(),
+            "IMU may be reordered within the window"
+        );
+        assert!(g.admit(InputKind::Mag, 1_010, 0, w, f, || "mag".into()).is_ok());
     }
 
     #[test]

@@ -4,6 +4,8 @@
 //! |---|---|---|
 //! | `uavnav/v1/vehicle/{id}/imu` | in | `uavnav.v1.ImuBatch` |
 //! | `uavnav/v1/vehicle/{id}/gnss` | in | `uavnav.v1.GnssFix` |
+//! | `uavnav/v1/vehicle/{id}/mag` | in | `uavnav.v1.MagSample` |
+//! | `uavnav/v1/vehicle/{id}/baro` | in | `uavnav.v1.BaroSample` |
 //! | `uavnav/v1/vehicle/{id}/camera` | in | `uavnav.v1.CameraFrame` |
 //! | `uavnav/v1/vehicle/{id}/config` | in | `uavnav.v1.VehicleConfig` |
 //! | `uavnav/v1/vehicle/{id}/pose` | out | `uavnav.v1.PoseEstimate` |
@@ -42,6 +44,16 @@ use crate::vehicle::VehicleStats;
 pub const VEHICLE_PREFIX: &str = "uavnav/v1/vehicle";
 /// Inputs of every vehicle.
 pub const INPUT_KEYS: &str = "uavnav/v1/vehicle/*/*";
+/// The input leaves `uavnav/v1/vehicle/{id}/{leaf}` the service subscribes to, with the metric
+/// kind of each (the client's `keys::Leaf` lists the same; a client test checks they agree).
+pub const INPUT_LEAVES: [(&str, Kind); 6] = [
+    ("imu", Kind::Imu),
+    ("gnss", Kind::Gnss),
+    ("mag", Kind::Mag),
+    ("baro", Kind::Baro),
+    ("camera", Kind::Camera),
+    ("config", Kind::Config),
+];
 /// The latest-pose queryable.
 pub const POSE_LATEST_KEYS: &str = "uavnav/v1/vehicle/*/pose/latest";
 /// The vehicle list queryable.
@@ -241,12 +253,8 @@ async fn decode_loop(
             continue;
         };
         // Our own outputs match `*/*` too (pose, health): not inputs.
-        let kind = match leaf {
-            "imu" => Kind::Imu,
-            "gnss" => Kind::Gnss,
-            "camera" => Kind::Camera,
-            "config" => Kind::Config,
-            _ => continue,
+        let Some(&(_, kind)) = INPUT_LEAVES.iter().find(|(l, _)| *l == leaf) else {
+            continue;
         };
         ingestor.registry().ctx().metrics.zenoh_samples.inc();
         let bytes = sample.payload().to_bytes();
@@ -265,6 +273,10 @@ async fn decode_loop(
                 .map(|m| (ingestor.clone(), id.to_owned(), In::Imu(m))),
             Kind::Gnss => decode::<pb::GnssFix>(&bytes)
                 .map(|m| (ingestor.clone(), id.to_owned(), In::Gnss(m))),
+            Kind::Mag => decode::<pb::MagSample>(&bytes)
+                .map(|m| (ingestor.clone(), id.to_owned(), In::Mag(m))),
+            Kind::Baro => decode::<pb::BaroSample>(&bytes)
+                .map(|m| (ingestor.clone(), id.to_owned(), In::Baro(m))),
             Kind::Camera => decode::<pb::CameraFrame>(&bytes)
                 .map(|m| (ingestor.clone(), id.to_owned(), In::Camera(m))),
             _ => decode::<pb::VehicleConfig>(&bytes)
@@ -291,6 +303,8 @@ async fn decode_loop(
 enum In {
     Imu(pb::ImuBatch),
     Gnss(pb::GnssFix),
+    Mag(pb::MagSample),
+    Baro(pb::BaroSample),
     Camera(pb::CameraFrame),
     Config(pb::VehicleConfig),
 }
@@ -300,6 +314,8 @@ impl In {
         match self {
             In::Imu(m) => Payload::Imu(m),
             In::Gnss(m) => Payload::Gnss(m),
+            In::Mag(m) => Payload::Mag(m),
+            In::Baro(m) => Payload::Baro(m),
             In::Camera(m) => Payload::Camera(m),
             In::Config(m) => Payload::Config(m),
         }
@@ -312,11 +328,13 @@ fn decode<M: Message + Default>(bytes: &[u8]) -> Result<M, prost::DecodeError> {
 
 /// Counts a refusal that never reached [`Ingestor::submit`] (undecodable or oversize).
 fn reject(ingestor: &Ingestor, id: &str, kind: Kind, outcome: Outcome, reason: &str) {
-    ingestor
-        .registry()
-        .ctx()
-        .metrics
-        .input(Transport::Zenoh, kind, outcome, 1);
+    let metrics = &ingestor.registry().ctx().metrics;
+    metrics.input(Transport::Zenoh, kind, outcome, 1);
+    let cause = match outcome {
+        Outcome::Exhausted => crate::metrics::Cause::Exhausted,
+        _ => crate::metrics::Cause::Malformed,
+    };
+    metrics.refuse(Transport::Zenoh, kind, cause);
     if let Some(h) = ingestor.registry().get(id) {
         VehicleStats::add(&h.shared.stats.rejected, 1);
     }

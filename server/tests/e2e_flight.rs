@@ -53,8 +53,7 @@ fn envelope(id: &str, seq: u64, e: &SensorEvent) -> pb::SensorEnvelope {
         SensorEvent::Imu(s) => P::Imu(pb::ImuBatch {
             samples: vec![s.into()],
         }),
-        SensorEvent::Gnss(f) => P::Gnss(f.into()),
-        SensorEvent::Camera(c) => P::Camera(c.into()),
+        other => P::from(other),
     };
     pb::SensorEnvelope {
         vehicle_id: id.into(),
@@ -184,6 +183,16 @@ async fn zenoh_flight_equals_offline_estimate() {
                 "gnss",
                 pb::GnssFix::from(f).encode_to_vec(),
                 "uavnav.v1.GnssFix",
+            ),
+            SensorEvent::Mag(m) => (
+                "mag",
+                pb::MagSample::from(m).encode_to_vec(),
+                "uavnav.v1.MagSample",
+            ),
+            SensorEvent::Baro(b) => (
+                "baro",
+                pb::BaroSample::from(b).encode_to_vec(),
+                "uavnav.v1.BaroSample",
             ),
             SensorEvent::Camera(f) => (
                 "camera",

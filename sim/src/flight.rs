@@ -166,7 +166,11 @@ impl Flight {
             gnss: s.gnss.enabled.then(|| GnssConfig {
                 rate_hz: s.gnss.rate_hz,
                 lever_arm_body_m: Vector3::from(s.gnss.lever_arm_m),
+                delay_ns: 0,
             }),
+            // The simulator gains a magnetometer and a barometer with issue 17's simulator work.
+            mag: None,
+            baro: None,
             camera: s.camera.enabled.then(|| CameraConfig {
                 rate_hz: s.camera.rate_hz,
                 model: self.camera_model(),

@@ -154,10 +154,12 @@ pub fn simulate_gnss(
             lat_deg: lla.lat_deg(),
             lon_deg: lla.lon_deg(),
             alt_m: lla.alt_m,
-            vel_ned_mps: v_ant + vel_noise,
+            velocity: Some(uavnav_core::GnssVelocity::ned(
+                v_ant + vel_noise,
+                spec.vel_sigma_mps,
+            )),
             sigma_h_m: spec.white_sigma_h_m.hypot(spec.gm_sigma_h_m),
             sigma_v_m: spec.white_sigma_v_m.hypot(spec.gm_sigma_v_m),
-            sigma_vel_mps: spec.vel_sigma_mps,
             fix_type: FixType::Fix3d,
             num_sats: spec.num_sats,
         });

@@ -77,7 +77,7 @@ fn gnss_lever_arm_holds_without_noise() {
             p_ant
         );
         assert!(
-            (fix.vel_ned_mps - v_ant).norm() < 1e-3,
+            (fix.velocity.unwrap().ned_mps().unwrap() - v_ant).norm() < 1e-3,
             "velocity at {}",
             fix.t_ns
         );
@@ -175,11 +175,7 @@ fn events_are_time_ordered_and_complete() {
         events.len(),
         f.imu().len() + f.gnss().len() + f.camera_times_ns().len()
     );
-    let rank = |e: &SensorEvent| match e {
-        SensorEvent::Imu(_) => 0,
-        SensorEvent::Gnss(_) => 1,
-        SensorEvent::Camera(_) => 2,
-    };
+    let rank = SensorEvent::rank;
     for w in events.windows(2) {
         assert!((w[0].t_ns(), rank(&w[0])) <= (w[1].t_ns(), rank(&w[1])));
     }

@@ -4,6 +4,8 @@
 //! <root>/mav0/imu0/data.csv, sensor.yaml          IMU (body = imu0 frame)
 //! <root>/mav0/cam0/data.csv, sensor.yaml, data/   camera 0, images <t_ns>.png|.jpg
 //! <root>/mav0/gnss0/data.csv, sensor.yaml         GNSS (T_BS translation = lever arm)
+//! <root>/mav0/mag0/data.csv, sensor.yaml          magnetometer (T_BS rotation: mag -> body)
+//! <root>/mav0/baro0/data.csv, sensor.yaml         barometer
 //! <root>/mav0/state_groundtruth_estimate0/data.csv, sensor.yaml (origin)   optional truth
 //! <root>/mav0/body.yaml                           optional uavnav extras (vehicle_id,
 //!                                                 terrain_elevation_m, filter_profile)
@@ -17,6 +19,10 @@ pub const IMU: &str = "imu0";
 pub const CAM: &str = "cam0";
 /// GNSS folder.
 pub const GNSS: &str = "gnss0";
+/// Magnetometer folder.
+pub const MAG: &str = "mag0";
+/// Barometer folder.
+pub const BARO: &str = "baro0";
 /// Truth folder.
 pub const TRUTH: &str = "state_groundtruth_estimate0";
 /// Data file in each sensor folder.
@@ -61,6 +67,16 @@ pub const GNSS_COLUMNS: &[&str] = &[
     "sigma_vertical",
     "sigma_velocity",
 ];
+
+/// `mag0/data.csv` header: calibrated flux density in the magnetometer frame.
+pub const MAG_HEADER: &str = "#timestamp [ns],m_x [T],m_y [T],m_z [T]";
+/// `mag0/data.csv` columns.
+pub const MAG_COLUMNS: &[&str] = &["timestamp", "m_x", "m_y", "m_z"];
+
+/// `baro0/data.csv` header (the temperature cell may be empty).
+pub const BARO_HEADER: &str = "#timestamp [ns],pressure [Pa],temperature [degC]";
+/// `baro0/data.csv` columns.
+pub const BARO_COLUMNS: &[&str] = &["timestamp", "pressure", "temperature"];
 
 /// `state_groundtruth_estimate0/data.csv` header (the EuRoC columns).
 pub const TRUTH_HEADER: &str = "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z [], v_RS_R_x [m s^-1], v_RS_R_y [m s^-1], v_RS_R_z [m s^-1], b_w_RS_S_x [rad s^-1], b_w_RS_S_y [rad s^-1], b_w_RS_S_z [rad s^-1], b_a_RS_S_x [m s^-2], b_a_RS_S_y [m s^-2], b_a_RS_S_z [m s^-2]";

@@ -6,8 +6,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use uavnav_core::{
-    CameraFrame, FixType, GnssFix, ImageFormat, ImuSample, Lla, SensorEvent, TruthSample,
-    VehicleConfig,
+    BaroSample, CameraFrame, FixType, GnssFix, GnssVelocity, ImageFormat, ImuSample, Lla,
+    MagSample, SensorEvent, TruthSample, VehicleConfig,
 };
 
 use super::layout::*;
@@ -59,6 +59,12 @@ impl AslDataset {
         let gnss = sensor_dir(&mav, GNSS)
             .map(|d| sensor_yaml::read_gnss(&d.join(SENSOR_YAML)))
             .transpose()?;
+        let mag = sensor_dir(&mav, MAG)
+            .map(|d| sensor_yaml::read_mag(&d.join(SENSOR_YAML)))
+            .transpose()?;
+        let baro = sensor_dir(&mav, BARO)
+            .map(|d| sensor_yaml::read_baro(&d.join(SENSOR_YAML)))
+            .transpose()?;
         let camera = sensor_dir(&mav, CAM)
             .map(|d| sensor_yaml::read_camera(&d.join(SENSOR_YAML)))
             .transpose()?;
@@ -78,6 +84,8 @@ impl AslDataset {
             config: VehicleConfig {
                 imu,
                 gnss,
+                mag,
+                baro,
                 camera,
                 terrain_elevation_m: body.terrain_elevation_m,
                 profile: body.profile,
@@ -113,14 +121,31 @@ impl AslDataset {
         self.truth.as_deref()
     }
 
-    /// The event sources (IMU, GNSS, camera), each streaming its `data.csv`.
+    /// The event sources (IMU, GNSS, magnetometer, barometer, camera), each streaming its
+    /// `data.csv`.
     pub(crate) fn sources(&self, skipped: Arc<AtomicUsize>) -> Result<Vec<Box<dyn EventSource>>> {
         let mut out: Vec<Box<dyn EventSource>> = vec![Box::new(ImuSource::open(
             &self.mav.join(IMU).join(DATA_CSV),
         )?)];
         if self.config.gnss.is_some() {
-            out.push(Box::new(GnssSource::open(
+            out.push(Box::new(RowSource::open(
                 &self.mav.join(GNSS).join(DATA_CSV),
+                GNSS_COLUMNS,
+                parse_gnss,
+            )?));
+        }
+        if self.config.mag.is_some() {
+            out.push(Box::new(RowSource::open(
+                &self.mav.join(MAG).join(DATA_CSV),
+                MAG_COLUMNS,
+                parse_mag,
+            )?));
+        }
+        if self.config.baro.is_some() {
+            out.push(Box::new(RowSource::open(
+                &self.mav.join(BARO).join(DATA_CSV),
+                BARO_COLUMNS,
+                parse_baro,
             )?));
         }
         if self.config.camera.is_some() {
@@ -225,45 +250,87 @@ impl EventSource for ImuSource {
     }
 }
 
-struct GnssSource {
-    csv: CsvReader,
-    order: Monotonic,
+fn parse_gnss(row: &crate::csv::Row<'_>) -> Result<SensorEvent> {
+    let t_ns = row.i64(0)?;
+    let pos: [f64; 3] = row.f64s(1)?;
+    let (vn, ve, vd) = (row.opt_f64(4)?, row.opt_f64(5)?, row.opt_f64(6)?);
+    let (sigma_h_m, sigma_v_m) = (row.f64(7)?, row.f64(8)?);
+    let sigma_vel = row.opt_f64(9)?;
+    // Velocity is optional as a whole (north, east and sigma_velocity all present or all empty);
+    // the vertical component is optional on its own.
+    let velocity = match (vn, ve, sigma_vel) {
+        (Some(north_mps), Some(east_mps), Some(sigma_mps)) => Some(GnssVelocity {
+            north_mps,
+            east_mps,
+            down_mps: vd,
+            sigma_mps,
+        }),
+        (None, None, None) if vd.is_none() => None,
+        _ => {
+            return Err(row.invalid(
+                "v_north, v_east and sigma_velocity must be all given or all empty \
+                 (v_down may be empty on its own)",
+            ));
+        }
+    };
+    // ASL rows carry no fix type or satellite count: a row is a 3-D fix.
+    Ok(SensorEvent::Gnss(GnssFix {
+        t_ns,
+        lat_deg: pos[0],
+        lon_deg: pos[1],
+        alt_m: pos[2],
+        velocity,
+        sigma_h_m,
+        sigma_v_m,
+        fix_type: FixType::Fix3d,
+        num_sats: 0,
+    }))
 }
 
-impl GnssSource {
-    fn open(path: &Path) -> Result<Self> {
-        Ok(GnssSource {
-            csv: CsvReader::open(path, GNSS_COLUMNS)?,
+fn parse_mag(row: &crate::csv::Row<'_>) -> Result<SensorEvent> {
+    Ok(SensorEvent::Mag(MagSample {
+        t_ns: row.i64(0)?,
+        field_t: Vector3::from(row.f64s::<3>(1)?),
+    }))
+}
+
+fn parse_baro(row: &crate::csv::Row<'_>) -> Result<SensorEvent> {
+    Ok(SensorEvent::Baro(BaroSample {
+        t_ns: row.i64(0)?,
+        pressure_pa: row.f64(1)?,
+        temperature_degc: row.opt_f64(2)?,
+    }))
+}
+
+/// A sensor whose rows each parse to one event on their own (GNSS, magnetometer, barometer).
+struct RowSource {
+    csv: CsvReader,
+    order: Monotonic,
+    parse: fn(&crate::csv::Row<'_>) -> Result<SensorEvent>,
+}
+
+impl RowSource {
+    fn open(
+        path: &Path,
+        columns: &[&'static str],
+        parse: fn(&crate::csv::Row<'_>) -> Result<SensorEvent>,
+    ) -> Result<Self> {
+        Ok(RowSource {
+            csv: CsvReader::open(path, columns)?,
             order: Monotonic::default(),
+            parse,
         })
     }
 }
 
-impl EventSource for GnssSource {
+impl EventSource for RowSource {
     fn next_event(&mut self) -> Option<Result<SensorEvent>> {
         let row = match self.csv.next_row()? {
             Ok(r) => r,
             Err(e) => return Some(Err(e)),
         };
-        let parse = || -> Result<SensorEvent> {
-            let t_ns = row.i64(0)?;
-            let c: [f64; 9] = row.f64s(1)?;
-            // ASL rows carry no fix type or satellite count: a row is a 3-D fix.
-            Ok(SensorEvent::Gnss(GnssFix {
-                t_ns,
-                lat_deg: c[0],
-                lon_deg: c[1],
-                alt_m: c[2],
-                vel_ned_mps: Vector3::new(c[3], c[4], c[5]),
-                sigma_h_m: c[6],
-                sigma_v_m: c[7],
-                sigma_vel_mps: c[8],
-                fix_type: FixType::Fix3d,
-                num_sats: 0,
-            }))
-        };
         let line = row.line();
-        let ev = parse();
+        let ev = (self.parse)(&row);
         Some(ev.and_then(|ev| {
             self.order
                 .check(self.csv.path(), line, ev.t_ns())

@@ -4,7 +4,8 @@ use std::path::Path;
 
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion};
 use uavnav_core::{
-    CameraConfig, CameraModel, Distortion, FilterProfile, GnssConfig, ImuConfig, Lla,
+    BaroConfig, CameraConfig, CameraModel, Distortion, FilterProfile, GnssConfig, ImuConfig, Lla,
+    MagConfig,
 };
 
 use super::layout::fmt_f64;
@@ -217,14 +218,89 @@ pub fn write_camera(c: &CameraConfig) -> String {
     )
 }
 
-/// The GNSS receiver from `gnss0/sensor.yaml` (lever arm = `T_BS` translation).
+/// Longest GNSS delay accepted, s: autopilots report 0.1–0.5 s; seconds mean a wrong unit.
+pub const MAX_GNSS_DELAY_S: f64 = 5.0;
+
+/// The GNSS receiver from `gnss0/sensor.yaml` (lever arm = `T_BS` translation; optional `delay_s`,
+/// how long after its validity a fix is stamped, default 0).
 pub fn read_gnss(path: &Path) -> Result<GnssConfig> {
     let y = Yaml::read(path)?;
     let t = read_t_bs(&y)?;
+    let delay_s = match y.get("delay_s") {
+        Some(node) => {
+            let d = y.f64("delay_s")?;
+            if !(0.0..=MAX_GNSS_DELAY_S).contains(&d) {
+                return Err(DatasetError::parse(
+                    path,
+                    node.line,
+                    format!("`delay_s` must be within 0..={MAX_GNSS_DELAY_S} s, found {d}"),
+                ));
+            }
+            d
+        }
+        None => 0.0,
+    };
     Ok(GnssConfig {
         rate_hz: positive(&y, "rate_hz")?,
         lever_arm_body_m: t.translation.vector,
+        delay_ns: uavnav_core::s_to_ns(delay_s),
     })
+}
+
+/// The magnetometer from `mag0/sensor.yaml`: `T_BS` (rotation only: magnetometer -> body),
+/// `rate_hz`, and its noise as `sigma` [T] (one number, or one per axis: the largest is used).
+pub fn read_mag(path: &Path) -> Result<MagConfig> {
+    let y = Yaml::read(path)?;
+    let t = read_t_bs(&y)?;
+    let sigma_t = match y.f64("sigma") {
+        Ok(s) => s,
+        Err(_) => y.f64_list("sigma", 3)?.into_iter().fold(0.0, f64::max),
+    };
+    if !(sigma_t > 0.0 && sigma_t < 1e-4) {
+        let line = y.get("sigma").map_or(1, |n| n.line);
+        return Err(DatasetError::parse(
+            path,
+            line,
+            format!("`sigma` must be in tesla, > 0 and < 1e-4, found {sigma_t}"),
+        ));
+    }
+    Ok(MagConfig {
+        rate_hz: positive(&y, "rate_hz")?,
+        body_from_mag: t.rotation,
+        sigma_t,
+    })
+}
+
+/// `mag0/sensor.yaml` text.
+pub fn write_mag(c: &MagConfig) -> String {
+    let t = Isometry3::from_parts(Translation3::identity(), c.body_from_mag);
+    format!(
+        "%YAML:1.0\nsensor_type: magnetometer\ncomment: written by uavnav\n\
+         # T_BS: magnetometer frame -> body frame (FRD, = imu0); rotation only.\n{}rate_hz: {}\n\
+         sigma: {} # [T] per axis and sample\n",
+        write_t_bs(&t),
+        fmt_f64(c.rate_hz),
+        fmt_f64(c.sigma_t),
+    )
+}
+
+/// The barometer from `baro0/sensor.yaml`: `rate_hz`, `sigma_pressure` [Pa].
+pub fn read_baro(path: &Path) -> Result<BaroConfig> {
+    let y = Yaml::read(path)?;
+    Ok(BaroConfig {
+        rate_hz: positive(&y, "rate_hz")?,
+        sigma_pressure_pa: positive(&y, "sigma_pressure")?,
+    })
+}
+
+/// `baro0/sensor.yaml` text.
+pub fn write_baro(c: &BaroConfig) -> String {
+    format!(
+        "%YAML:1.0\nsensor_type: barometer\ncomment: written by uavnav\nrate_hz: {}\n\
+         sigma_pressure: {} # [Pa] per sample\n",
+        fmt_f64(c.rate_hz),
+        fmt_f64(c.sigma_pressure_pa),
+    )
 }
 
 /// `gnss0/sensor.yaml` text.
@@ -235,9 +311,11 @@ pub fn write_gnss(c: &GnssConfig) -> String {
     );
     format!(
         "%YAML:1.0\nsensor_type: gnss\ncomment: written by uavnav\n\
-         # Antenna phase centre in the body frame: the T_BS translation is the lever arm, m.\n{}rate_hz: {}\n",
+         # Antenna phase centre in the body frame: the T_BS translation is the lever arm, m.\n{}rate_hz: {}\n\
+         delay_s: {} # a fix stamped t was valid at t - delay_s\n",
         write_t_bs(&t),
-        fmt_f64(c.rate_hz)
+        fmt_f64(c.rate_hz),
+        fmt_f64(uavnav_core::ns_to_s(c.delay_ns))
     )
 }
 

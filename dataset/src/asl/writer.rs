@@ -4,7 +4,10 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-use uavnav_core::{CameraFrame, GnssFix, ImuSample, Lla, SensorEvent, TruthSample, VehicleConfig};
+use uavnav_core::{
+    BaroSample, CameraFrame, GnssFix, ImuSample, Lla, MagSample, SensorEvent, TruthSample,
+    VehicleConfig,
+};
 
 use super::layout::*;
 use super::sensor_yaml;
@@ -17,6 +20,8 @@ pub struct AslWriter {
     mav: PathBuf,
     imu: Csv,
     gnss: Option<Csv>,
+    mag: Option<Csv>,
+    baro: Option<Csv>,
     cam: Option<Csv>,
     truth: Option<Csv>,
     origin: Option<Lla>,
@@ -52,11 +57,18 @@ impl Csv {
 
     /// Writes a row; `t_ns` must be after the previous row's.
     fn row(&mut self, t_ns: i64, cells: &[f64]) -> Result<()> {
+        self.opt_row(t_ns, cells.iter().map(|&v| Some(v)))
+    }
+
+    /// Writes a row whose `None` cells are left empty; `t_ns` must be after the previous row's.
+    fn opt_row(&mut self, t_ns: i64, cells: impl IntoIterator<Item = Option<f64>>) -> Result<()> {
         self.check_time(t_ns)?;
         let mut s = t_ns.to_string();
         for v in cells {
             s.push(',');
-            s.push_str(&fmt_f64(*v));
+            if let Some(v) = v {
+                s.push_str(&fmt_f64(v));
+            }
         }
         self.line(&s)
     }
@@ -119,6 +131,28 @@ impl AslWriter {
             }
             None => None,
         };
+        let mag = match &config.mag {
+            Some(m) => {
+                let csv = Csv::create(&mav.join(MAG), MAG_HEADER)?;
+                write_file(
+                    &mav.join(MAG).join(SENSOR_YAML),
+                    &sensor_yaml::write_mag(m),
+                )?;
+                Some(csv)
+            }
+            None => None,
+        };
+        let baro = match &config.baro {
+            Some(b) => {
+                let csv = Csv::create(&mav.join(BARO), BARO_HEADER)?;
+                write_file(
+                    &mav.join(BARO).join(SENSOR_YAML),
+                    &sensor_yaml::write_baro(b),
+                )?;
+                Some(csv)
+            }
+            None => None,
+        };
         let cam = match &config.camera {
             Some(c) => {
                 let csv = Csv::create(&mav.join(CAM), CAM_HEADER)?;
@@ -145,6 +179,8 @@ impl AslWriter {
             mav,
             imu,
             gnss,
+            mag,
+            baro,
             cam,
             truth: None,
             origin,
@@ -162,6 +198,8 @@ impl AslWriter {
         match event {
             SensorEvent::Imu(s) => self.write_imu(s),
             SensorEvent::Gnss(f) => self.write_gnss(f),
+            SensorEvent::Mag(m) => self.write_mag(m),
+            SensorEvent::Baro(b) => self.write_baro(b),
             SensorEvent::Camera(c) => self.write_frame(c),
         }
     }
@@ -181,21 +219,40 @@ impl AslWriter {
                 path: self.mav.join(GNSS),
                 message: "GNSS fix for a vehicle configured without GNSS".into(),
             })?;
-        let v = f.vel_ned_mps;
-        csv.row(
+        let v = f.velocity;
+        csv.opt_row(
             f.t_ns,
-            &[
-                f.lat_deg,
-                f.lon_deg,
-                f.alt_m,
-                v.x,
-                v.y,
-                v.z,
-                f.sigma_h_m,
-                f.sigma_v_m,
-                f.sigma_vel_mps,
+            [
+                Some(f.lat_deg),
+                Some(f.lon_deg),
+                Some(f.alt_m),
+                v.map(|v| v.north_mps),
+                v.map(|v| v.east_mps),
+                v.and_then(|v| v.down_mps),
+                Some(f.sigma_h_m),
+                Some(f.sigma_v_m),
+                v.map(|v| v.sigma_mps),
             ],
         )
+    }
+
+    /// Appends a magnetometer sample.
+    pub fn write_mag(&mut self, m: &MagSample) -> Result<()> {
+        let csv = self.mag.as_mut().ok_or_else(|| DatasetError::Unsupported {
+            path: self.mav.join(MAG),
+            message: "magnetometer sample for a vehicle configured without one".into(),
+        })?;
+        let b = m.field_t;
+        csv.row(m.t_ns, &[b.x, b.y, b.z])
+    }
+
+    /// Appends a barometer sample (an unknown temperature is an empty cell).
+    pub fn write_baro(&mut self, b: &BaroSample) -> Result<()> {
+        let csv = self.baro.as_mut().ok_or_else(|| DatasetError::Unsupported {
+            path: self.mav.join(BARO),
+            message: "barometer sample for a vehicle configured without one".into(),
+        })?;
+        csv.opt_row(b.t_ns, [Some(b.pressure_pa), b.temperature_degc])
     }
 
     /// Writes a frame's image as `cam0/data/<t_ns>.jpg|.png` and appends its row.
@@ -258,7 +315,10 @@ impl AslWriter {
     /// Flushes every file.
     pub fn finish(self) -> Result<()> {
         self.imu.finish()?;
-        for csv in [self.gnss, self.cam, self.truth].into_iter().flatten() {
+        for csv in [self.gnss, self.mag, self.baro, self.cam, self.truth]
+            .into_iter()
+            .flatten()
+        {
             csv.finish()?;
         }
         Ok(())

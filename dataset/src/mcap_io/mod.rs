@@ -7,6 +7,8 @@
 //! | `/uavnav/{vehicle}/imu` | `uavnav.v1.ImuBatch` | IMU samples (one sample per message when written here) |
 //! | `/uavnav/{vehicle}/gnss` | `uavnav.v1.GnssFix` | GNSS fixes |
 //! | `/uavnav/{vehicle}/gnss/location` | `foxglove.LocationFix` | the same fixes for Foxglove's map (display only, ignored when reading) |
+//! | `/uavnav/{vehicle}/mag` | `uavnav.v1.MagSample` | magnetometer samples (tesla, magnetometer frame) |
+//! | `/uavnav/{vehicle}/baro` | `uavnav.v1.BaroSample` | barometer samples |
 //! | `/uavnav/{vehicle}/camera` | `foxglove.CompressedImage` | camera frames: `frame_id` = `cam{id}`, `timestamp` = `t_ns` |
 //! | `/uavnav/{vehicle}/config` | `uavnav.v1.VehicleConfig` | the vehicle configuration |
 //! | `/uavnav/{vehicle}/info` | `uavnav.v1.DatasetInfo` | the truth's NED origin |
@@ -46,6 +48,10 @@ pub enum Stream {
     Gnss,
     /// `gnss/location` (display)
     GnssLocation,
+    /// `mag`
+    Mag,
+    /// `baro`
+    Baro,
     /// `camera`
     Camera,
     /// `config`
@@ -63,10 +69,12 @@ pub enum Stream {
 }
 
 /// Every stream, for lookups.
-const STREAMS: [Stream; 10] = [
+const STREAMS: [Stream; 12] = [
     Stream::Imu,
     Stream::Gnss,
     Stream::GnssLocation,
+    Stream::Mag,
+    Stream::Baro,
     Stream::Camera,
     Stream::Config,
     Stream::Info,
@@ -86,6 +94,8 @@ impl Stream {
             Stream::Imu => "imu",
             Stream::Gnss => "gnss",
             Stream::GnssLocation => "gnss/location",
+            Stream::Mag => "mag",
+            Stream::Baro => "baro",
             Stream::Camera => "camera",
             Stream::Config => "config",
             Stream::Info => "info",
@@ -102,6 +112,8 @@ impl Stream {
             Stream::Imu => names::IMU_BATCH,
             Stream::Gnss => names::GNSS_FIX,
             Stream::GnssLocation => names::FOXGLOVE_LOCATION_FIX,
+            Stream::Mag => names::MAG_SAMPLE,
+            Stream::Baro => names::BARO_SAMPLE,
             Stream::Camera => names::FOXGLOVE_COMPRESSED_IMAGE,
             Stream::Config => names::VEHICLE_CONFIG,
             Stream::Info => names::DATASET_INFO,

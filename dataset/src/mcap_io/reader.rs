@@ -10,7 +10,8 @@ use std::sync::Arc;
 
 use prost::Message;
 use uavnav_core::{
-    CameraFrame, GnssFix, ImageFormat, ImuSample, Lla, SensorEvent, TruthSample, VehicleConfig,
+    BaroSample, CameraFrame, GnssFix, ImageFormat, ImuSample, Lla, MagSample, SensorEvent,
+    TruthSample, VehicleConfig,
 };
 use uavnav_proto::{ConvertError, convert::sensors::imu_batch, v1};
 
@@ -264,6 +265,18 @@ impl McapEvents {
                 let wire: v1::GnssFix = decode(&path, msg)?;
                 vec![SensorEvent::Gnss(
                     GnssFix::try_from(&wire).map_err(|e| invalid(&path, msg, e))?,
+                )]
+            }
+            Stream::Mag => {
+                let wire: v1::MagSample = decode(&path, msg)?;
+                vec![SensorEvent::Mag(
+                    MagSample::try_from(&wire).map_err(|e| invalid(&path, msg, e))?,
+                )]
+            }
+            Stream::Baro => {
+                let wire: v1::BaroSample = decode(&path, msg)?;
+                vec![SensorEvent::Baro(
+                    BaroSample::try_from(&wire).map_err(|e| invalid(&path, msg, e))?,
                 )]
             }
             Stream::Camera => {

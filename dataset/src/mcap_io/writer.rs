@@ -183,6 +183,13 @@ impl McapWriter {
                 }
                 Ok(())
             }
+            SensorEvent::Mag(m) => {
+                self.write_message(vehicle, Stream::Mag, &v1::MagSample::from(m), t, log_time_ns)
+            }
+            SensorEvent::Baro(b) => {
+                let wire = v1::BaroSample::from(b);
+                self.write_message(vehicle, Stream::Baro, &wire, t, log_time_ns)
+            }
             SensorEvent::Camera(c) => {
                 let frame = v1::CameraFrame::from(c);
                 let image = frame

@@ -8,8 +8,9 @@ use std::sync::Arc;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use uavnav_core::rng::Rng;
 use uavnav_core::{
-    CameraConfig, CameraFrame, CameraModel, Distortion, FilterProfile, FixType, GnssConfig,
-    GnssFix, ImageFormat, ImuConfig, ImuSample, Lla, SensorEvent, TruthSample, VehicleConfig,
+    BaroConfig, BaroSample, CameraConfig, CameraFrame, CameraModel, Distortion, FilterProfile,
+    FixType, GnssConfig, GnssFix, GnssVelocity, ImageFormat, ImuConfig, ImuSample, Lla, MagConfig,
+    MagSample, SensorEvent, TruthSample, VehicleConfig,
 };
 use uavnav_dataset::AslWriter;
 
@@ -19,6 +20,16 @@ pub fn config() -> VehicleConfig {
         gnss: Some(GnssConfig {
             rate_hz: 5.0,
             lever_arm_body_m: Vector3::new(0.0, 2.0, 0.0),
+            delay_ns: 220_000_000,
+        }),
+        mag: Some(MagConfig {
+            rate_hz: 50.0,
+            body_from_mag: UnitQuaternion::from_euler_angles(std::f64::consts::PI, 0.0, 0.0),
+            sigma_t: 7.0e-8,
+        }),
+        baro: Some(BaroConfig {
+            rate_hz: 20.0,
+            sigma_pressure_pa: 0.6,
         }),
         camera: Some(CameraConfig {
             rate_hz: 10.0,
@@ -79,12 +90,37 @@ pub fn events(seconds: i64, seed: u64) -> (Vec<SensorEvent>, Vec<TruthSample>) {
                 lat_deg: 40.85 + rng.gaussian() * 1e-5,
                 lon_deg: 14.27 + rng.gaussian() * 1e-5,
                 alt_m: 400.0 + rng.gaussian(),
-                vel_ned_mps: Vector3::new(30.0, 0.0, 0.0) + rng.gaussian3(0.1),
+                // every third fix without velocity, every third without its vertical component
+                velocity: match (k / 40) % 3 {
+                    0 => Some(GnssVelocity::ned(
+                        Vector3::new(30.0, 0.0, 0.0) + rng.gaussian3(0.1),
+                        0.1,
+                    )),
+                    1 => None,
+                    _ => Some(GnssVelocity {
+                        north_mps: 30.0 + rng.gaussian() * 0.1,
+                        east_mps: rng.gaussian() * 0.1,
+                        down_mps: None,
+                        sigma_mps: 0.2,
+                    }),
+                },
                 sigma_h_m: 1.5,
                 sigma_v_m: 3.0,
-                sigma_vel_mps: 0.1,
                 fix_type: FixType::Fix3d,
                 num_sats: 0,
+            }));
+        }
+        if k % 4 == 1 {
+            events.push(SensorEvent::Mag(MagSample {
+                t_ns: t_ns + 1_000,
+                field_t: Vector3::new(2.2e-5, -1.0e-6, 4.1e-5) + rng.gaussian3(7.0e-8),
+            }));
+        }
+        if k % 10 == 3 {
+            events.push(SensorEvent::Baro(BaroSample {
+                t_ns: t_ns + 2_000,
+                pressure_pa: 96_000.0 + rng.gaussian() * 0.6,
+                temperature_degc: (k % 20 == 3).then_some(21.5 + rng.gaussian() * 0.1),
             }));
         }
         if k % 20 == 10 {

@@ -19,14 +19,29 @@ pub struct GnssMeas {
     pub t_ns: i64,
     /// Antenna position, local NED, m.
     pub pos_ned_m: Vector3<f64>,
-    /// Antenna velocity, NED, m/s.
-    pub vel_ned_mps: Vector3<f64>,
+    /// Antenna velocity, NED, m/s, when the receiver gave all three components (fixes without
+    /// velocity, or without its vertical component, are fused for position only).
+    pub vel_ned_mps: Option<Vector3<f64>>,
     /// Reported 1-σ horizontal position, m.
     pub sigma_h_m: f64,
     /// Reported 1-σ vertical position, m.
     pub sigma_v_m: f64,
-    /// Reported 1-σ velocity per axis, m/s.
+    /// Reported 1-σ velocity per axis, m/s (meaningless without `vel_ned_mps`).
     pub sigma_vel_mps: f64,
+}
+
+impl GnssMeas {
+    /// The measurement of one fix in the local frame `frame`.
+    pub fn from_fix(fix: &uavnav_core::GnssFix, pos_ned_m: Vector3<f64>) -> Self {
+        Self {
+            t_ns: fix.t_ns,
+            pos_ned_m,
+            vel_ned_mps: fix.velocity.and_then(|v| v.ned_mps()),
+            sigma_h_m: fix.sigma_h_m,
+            sigma_v_m: fix.sigma_v_m,
+            sigma_vel_mps: fix.velocity.map_or(f64::INFINITY, |v| v.sigma_mps),
+        }
+    }
 }
 
 /// Predicted antenna position, its residual and Jacobian `H` (w.r.t. the error state).

@@ -67,7 +67,8 @@ impl GnssVelSource {
         gate_sigma: f64,
         reset_timeout_ns: i64,
     ) -> Option<ErrVec> {
-        let (y, h) = model(x, lever_b, gyro_b, w_ie, &meas.vel_ned_mps);
+        let v_meas = meas.vel_ned_mps?;
+        let (y, h) = model(x, lever_b, gyro_b, w_ie, &v_meas);
         let r = Matrix3::identity() * meas.sigma_vel_mps.powi(2).max(1e-6);
         let stuck = self.diag.consecutive_rejects > 0
             && meas.t_ns - self.diag.first_reject_t_ns >= reset_timeout_ns;

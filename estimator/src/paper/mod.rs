@@ -92,6 +92,8 @@ pub struct PaperFilter {
     health: Health,
     /// Diagnostics of the GNSS-derived attitude aiding of the alignment.
     gnss_att_diag: crate::aid_sources::InnovDiag,
+    /// Fixes left out because they carried no full velocity (this profile needs it).
+    fixes_without_velocity: u64,
     /// The alignment is over (every attitude σ fell below `paper_video_start_sigma_rad`).
     aligned: bool,
 }
@@ -123,6 +125,7 @@ impl PaperFilter {
             init_f: VecDeque::new(),
             health: Health::default(),
             gnss_att_diag: crate::aid_sources::InnovDiag::new(),
+            fixes_without_velocity: 0,
             aligned: false,
         };
         if let Some(o) = origin {
@@ -153,6 +156,7 @@ impl PaperFilter {
         fresh.init_f.clear();
         fresh.health = Health::default();
         fresh.aligned = false;
+        fresh.fixes_without_velocity = 0;
         *self = fresh;
         if let Some(o) = cfg_frame {
             self.set_frame(o);
@@ -230,13 +234,12 @@ impl PaperFilter {
             self.set_frame(lla);
         }
         let Some(frame) = self.frame else { return };
-        let meas = GnssMeas {
-            t_ns: fix.t_ns,
-            pos_ned_m: frame.lla_to_ned(&lla),
-            vel_ned_mps: fix.vel_ned_mps,
-            sigma_h_m: fix.sigma_h_m,
-            sigma_v_m: fix.sigma_v_m,
-            sigma_vel_mps: fix.sigma_vel_mps,
+        let meas = GnssMeas::from_fix(fix, frame.lla_to_ned(&lla));
+        // The paper's GPS-IMU filter (eqs. 32–33) fuses position and velocity together and aligns
+        // from the velocity: a fix without a full velocity is counted and left out of this profile.
+        let Some(meas_vel) = meas.vel_ned_mps else {
+            self.fixes_without_velocity += 1;
+            return;
         };
         let f_mean = if self.f_sum.1 > 0 {
             self.f_sum.0 / self.f_sum.1 as f64
@@ -265,14 +268,14 @@ impl PaperFilter {
         };
         let a_n = match self.last_fix {
             Some((p, _)) if meas.t_ns > p.t_ns && meas.t_ns - p.t_ns < 2_000_000_000 => {
-                (meas.vel_ned_mps - p.vel_ned_mps) / ((meas.t_ns - p.t_ns) as f64 * 1e-9)
+                (meas_vel - p.vel_ned_mps.unwrap_or(meas_vel)) / ((meas.t_ns - p.t_ns) as f64 * 1e-9)
             }
             _ => Vector3::zeros(),
         };
         self.last_fix = Some((meas, a_n));
         let g = frame.gravity_ned(&meas.pos_ned_m);
         if self.att.is_none() {
-            self.try_init(&meas, &g, &a_n, &gyro);
+            self.try_init(&meas, &meas_vel, &g, &a_n, &gyro);
             return;
         }
         let start_var = self.params.paper_video_start_sigma_rad.powi(2);
@@ -285,7 +288,7 @@ impl PaperFilter {
                 // The course is that of the vehicle, not of the antenna: remove the lever-arm
                 // velocity C (ω × r) of eq. (33) (0.35 m/s for 2 m at 10 °/s, 0.7° of course).
                 let w_nb = gyro - att.rotation().transpose() * self.w_ie;
-                let v_body = meas.vel_ned_mps - att.rotation() * w_nb.cross(&self.lever_b);
+                let v_body = meas_vel - att.rotation() * w_nb.cross(&self.lever_b);
                 let course_sigma = course_sigma_rad(meas.sigma_vel_mps, &v_body);
                 gnss_attitude_aiding(
                     att,
@@ -320,6 +323,7 @@ impl PaperFilter {
     fn try_init(
         &mut self,
         meas: &GnssMeas,
+        meas_vel: &Vector3<f64>,
         g: &Vector3<f64>,
         a_n: &Vector3<f64>,
         gyro: &Vector3<f64>,
@@ -328,9 +332,9 @@ impl PaperFilter {
             return;
         }
         let f_b = self.init_f.iter().sum::<Vector3<f64>>() / self.init_f.len() as f64;
-        let moving = meas.vel_ned_mps.xy().norm() >= self.params.init_min_speed_mps;
+        let moving = meas_vel.xy().norm() >= self.params.init_min_speed_mps;
         let yaw = if moving {
-            meas.vel_ned_mps.y.atan2(meas.vel_ned_mps.x)
+            meas_vel.y.atan2(meas_vel.x)
         } else {
             0.0
         };
@@ -351,7 +355,7 @@ impl PaperFilter {
         );
         let c = att.rotation();
         let pos = meas.pos_ned_m - c * self.lever_b;
-        let vel = meas.vel_ned_mps - c * gyro.cross(&self.lever_b);
+        let vel = meas_vel - c * gyro.cross(&self.lever_b);
         self.gps_imu = Some(PosVelEkf::new(
             pos,
             vel,

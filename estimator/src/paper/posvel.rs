@@ -139,7 +139,9 @@ impl PosVelEkf {
         let c = att.rotation();
         let u = w_nb.cross(lever_b);
         let h_e = lever_jacobian(&att.euler, &u);
-        let y = m.vel_ned_mps - (self.v + c * u);
+        // The caller fuses only fixes with a full velocity (paper profile, `push_gnss`).
+        let Some(v_meas) = m.vel_ned_mps else { return };
+        let y = v_meas - (self.v + c * u);
         let rv = Matrix3::identity() * m.sigma_vel_mps.powi(2);
         let stuck = diag_vel.consecutive_rejects > 0
             && m.t_ns - diag_vel.first_reject_t_ns >= reset_timeout_ns;

@@ -1,10 +1,11 @@
 //! Vehicle configuration: IMU noise, GNSS lever arm, camera model and mount, profile.
 
 use uavnav_core::{
-    CameraConfig, CameraModel, Distortion, FilterProfile, GnssConfig, ImuConfig, VehicleConfig,
+    BaroConfig, CameraConfig, CameraModel, Distortion, FilterProfile, GnssConfig, ImuConfig,
+    MagConfig, VehicleConfig,
 };
 
-use super::geometry::{isometry, required_vector3};
+use super::geometry::{isometry, required_quaternion, required_vector3};
 use super::{ConvertError, finite, in_range, non_negative, positive, required};
 use crate::v1;
 
@@ -46,7 +47,53 @@ impl TryFrom<&v1::GnssConfig> for GnssConfig {
         Ok(GnssConfig {
             rate_hz: positive("rate_hz", c.rate_hz, MAX_RATE_HZ)?,
             lever_arm_body_m: required_vector3("lever_arm_body_m", &c.lever_arm_body_m)?,
+            delay_ns: uavnav_core::s_to_ns(in_range(
+                "delay_s",
+                c.delay_s,
+                0.0,
+                super::limits::MAX_GNSS_DELAY_S,
+            )?),
         })
+    }
+}
+
+impl TryFrom<&v1::MagConfig> for MagConfig {
+    type Error = ConvertError;
+    fn try_from(c: &v1::MagConfig) -> Result<Self, ConvertError> {
+        Ok(MagConfig {
+            rate_hz: positive("rate_hz", c.rate_hz, MAX_RATE_HZ)?,
+            body_from_mag: required_quaternion("body_from_mag", &c.body_from_mag)?,
+            sigma_t: positive("sigma_t", c.sigma_t, super::limits::MAX_MAG_FIELD_T)?,
+        })
+    }
+}
+
+impl From<&MagConfig> for v1::MagConfig {
+    fn from(c: &MagConfig) -> Self {
+        v1::MagConfig {
+            rate_hz: c.rate_hz,
+            body_from_mag: Some((&c.body_from_mag).into()),
+            sigma_t: c.sigma_t,
+        }
+    }
+}
+
+impl TryFrom<&v1::BaroConfig> for BaroConfig {
+    type Error = ConvertError;
+    fn try_from(c: &v1::BaroConfig) -> Result<Self, ConvertError> {
+        Ok(BaroConfig {
+            rate_hz: positive("rate_hz", c.rate_hz, MAX_RATE_HZ)?,
+            sigma_pressure_pa: positive("sigma_pressure_pa", c.sigma_pressure_pa, 1.0e4)?,
+        })
+    }
+}
+
+impl From<&BaroConfig> for v1::BaroConfig {
+    fn from(c: &BaroConfig) -> Self {
+        v1::BaroConfig {
+            rate_hz: c.rate_hz,
+            sigma_pressure_pa: c.sigma_pressure_pa,
+        }
     }
 }
 
@@ -55,6 +102,7 @@ impl From<&GnssConfig> for v1::GnssConfig {
         v1::GnssConfig {
             rate_hz: c.rate_hz,
             lever_arm_body_m: Some((&c.lever_arm_body_m).into()),
+            delay_s: uavnav_core::ns_to_s(c.delay_ns),
         }
     }
 }
@@ -194,10 +242,24 @@ impl TryFrom<&v1::VehicleConfig> for VehicleConfig {
             .map(CameraConfig::try_from)
             .transpose()
             .map_err(|e| e.within("camera"))?;
+        let mag = c
+            .mag
+            .as_ref()
+            .map(MagConfig::try_from)
+            .transpose()
+            .map_err(|e| e.within("mag"))?;
+        let baro = c
+            .baro
+            .as_ref()
+            .map(BaroConfig::try_from)
+            .transpose()
+            .map_err(|e| e.within("baro"))?;
         let (lo, hi) = TERRAIN_RANGE_M;
         Ok(VehicleConfig {
             imu,
             gnss,
+            mag,
+            baro,
             camera,
             terrain_elevation_m: in_range("terrain_elevation_m", c.terrain_elevation_m, lo, hi)?,
             profile: filter_profile("profile", c.profile)?,
@@ -211,6 +273,8 @@ impl From<&VehicleConfig> for v1::VehicleConfig {
             imu: Some((&c.imu).into()),
             gnss: c.gnss.as_ref().map(Into::into),
             camera: c.camera.as_ref().map(Into::into),
+            mag: c.mag.as_ref().map(Into::into),
+            baro: c.baro.as_ref().map(Into::into),
             terrain_elevation_m: c.terrain_elevation_m,
             profile: v1::FilterProfile::from(c.profile) as i32,
         }

@@ -29,6 +29,15 @@ pub mod limits {
     pub const MAX_VEL_MPS: f64 = 2_000.0;
     /// Accepted range of 1-σ GNSS errors (m or m/s): strictly positive, below this bound.
     pub const MAX_SIGMA: f64 = 1.0e5;
+    /// Largest accepted magnetic flux density per axis, T (the Earth's field is 22–67 µT; a
+    /// millitesla is a saturated or broken sensor).
+    pub const MAX_MAG_FIELD_T: f64 = 1.0e-3;
+    /// Accepted static pressure range, Pa (30 km altitude to below the Dead Sea, with margin).
+    pub const PRESSURE_RANGE_PA: (f64, f64) = (500.0, 120_000.0);
+    /// Accepted sensor temperature range, °C.
+    pub const TEMPERATURE_RANGE_DEGC: (f64, f64) = (-90.0, 150.0);
+    /// Longest accepted GNSS stamp delay, s (autopilots report 0.1–0.5 s).
+    pub const MAX_GNSS_DELAY_S: f64 = 5.0;
     /// Largest accepted deviation of a quaternion's norm from 1 (the quaternion is then normalised).
     pub const QUAT_NORM_TOL: f64 = 1.0e-2;
 }

@@ -1,9 +1,11 @@
-//! Sensor samples: IMU, GNSS, camera frames.
+//! Sensor samples: IMU, GNSS, magnetometer, barometer, camera frames.
 
 use std::sync::Arc;
 
 use nalgebra::Vector3;
-use uavnav_core::{CameraFrame, FixType, GnssFix, ImageFormat, ImuSample};
+use uavnav_core::{
+    BaroSample, CameraFrame, FixType, GnssFix, GnssVelocity, ImageFormat, ImuSample, MagSample,
+};
 
 use super::{ConvertError, in_range, limits, positive, required};
 use crate::v1;
@@ -115,22 +117,31 @@ impl TryFrom<&v1::GnssFix> for GnssFix {
             lat_deg: in_range("latitude_deg", f.latitude_deg, -90.0, 90.0)?,
             lon_deg: in_range("longitude_deg", f.longitude_deg, -180.0, 180.0)?,
             alt_m: in_range("altitude_m", f.altitude_m, alt_lo, alt_hi)?,
-            vel_ned_mps: Vector3::new(
-                in_range("vel_north_mps", f.vel_north_mps, -v, v)?,
-                in_range("vel_east_mps", f.vel_east_mps, -v, v)?,
-                in_range("vel_down_mps", f.vel_down_mps, -v, v)?,
-            ),
+            velocity: match (f.vel_north_mps, f.vel_east_mps, f.sigma_velocity_mps) {
+                (Some(n), Some(e), Some(s)) => Some(GnssVelocity {
+                    north_mps: in_range("vel_north_mps", n, -v, v)?,
+                    east_mps: in_range("vel_east_mps", e, -v, v)?,
+                    down_mps: f
+                        .vel_down_mps
+                        .map(|d| in_range("vel_down_mps", d, -v, v))
+                        .transpose()?,
+                    sigma_mps: positive("sigma_velocity_mps", s, limits::MAX_SIGMA)?,
+                }),
+                (None, None, None) if f.vel_down_mps.is_none() => None,
+                _ => {
+                    return Err(ConvertError::invalid(
+                        "vel_north_mps",
+                        "vel_north_mps, vel_east_mps and sigma_velocity_mps must be all set or \
+                         all unset (vel_down_mps may be unset on its own)",
+                    ));
+                }
+            },
             sigma_h_m: positive(
                 "sigma_horizontal_m",
                 f.sigma_horizontal_m,
                 limits::MAX_SIGMA,
             )?,
             sigma_v_m: positive("sigma_vertical_m", f.sigma_vertical_m, limits::MAX_SIGMA)?,
-            sigma_vel_mps: positive(
-                "sigma_velocity_mps",
-                f.sigma_velocity_mps,
-                limits::MAX_SIGMA,
-            )?,
             fix_type: fix_type("fix_type", f.fix_type)?,
             num_sats: f.num_satellites,
         })
@@ -144,14 +155,66 @@ impl From<&GnssFix> for v1::GnssFix {
             latitude_deg: f.lat_deg,
             longitude_deg: f.lon_deg,
             altitude_m: f.alt_m,
-            vel_north_mps: f.vel_ned_mps.x,
-            vel_east_mps: f.vel_ned_mps.y,
-            vel_down_mps: f.vel_ned_mps.z,
+            vel_north_mps: f.velocity.map(|v| v.north_mps),
+            vel_east_mps: f.velocity.map(|v| v.east_mps),
+            vel_down_mps: f.velocity.and_then(|v| v.down_mps),
             sigma_horizontal_m: f.sigma_h_m,
             sigma_vertical_m: f.sigma_v_m,
-            sigma_velocity_mps: f.sigma_vel_mps,
+            sigma_velocity_mps: f.velocity.map(|v| v.sigma_mps),
             fix_type: v1::FixType::from(f.fix_type) as i32,
             num_satellites: f.num_sats,
+        }
+    }
+}
+
+impl TryFrom<&v1::MagSample> for MagSample {
+    type Error = ConvertError;
+    fn try_from(m: &v1::MagSample) -> Result<Self, ConvertError> {
+        let b = limits::MAX_MAG_FIELD_T;
+        Ok(MagSample {
+            t_ns: m.t_ns,
+            field_t: Vector3::new(
+                in_range("field_x_t", m.field_x_t, -b, b)?,
+                in_range("field_y_t", m.field_y_t, -b, b)?,
+                in_range("field_z_t", m.field_z_t, -b, b)?,
+            ),
+        })
+    }
+}
+
+impl From<&MagSample> for v1::MagSample {
+    fn from(m: &MagSample) -> Self {
+        v1::MagSample {
+            t_ns: m.t_ns,
+            field_x_t: m.field_t.x,
+            field_y_t: m.field_t.y,
+            field_z_t: m.field_t.z,
+        }
+    }
+}
+
+impl TryFrom<&v1::BaroSample> for BaroSample {
+    type Error = ConvertError;
+    fn try_from(b: &v1::BaroSample) -> Result<Self, ConvertError> {
+        let (p_lo, p_hi) = limits::PRESSURE_RANGE_PA;
+        let (t_lo, t_hi) = limits::TEMPERATURE_RANGE_DEGC;
+        Ok(BaroSample {
+            t_ns: b.t_ns,
+            pressure_pa: in_range("pressure_pa", b.pressure_pa, p_lo, p_hi)?,
+            temperature_degc: b
+                .temperature_degc
+                .map(|t| in_range("temperature_degc", t, t_lo, t_hi))
+                .transpose()?,
+        })
+    }
+}
+
+impl From<&BaroSample> for v1::BaroSample {
+    fn from(b: &BaroSample) -> Self {
+        v1::BaroSample {
+            t_ns: b.t_ns,
+            pressure_pa: b.pressure_pa,
+            temperature_degc: b.temperature_degc,
         }
     }
 }
@@ -219,6 +282,8 @@ impl From<&uavnav_core::SensorEvent> for v1::sensor_envelope::Payload {
                 samples: vec![s.into()],
             }),
             uavnav_core::SensorEvent::Gnss(f) => Payload::Gnss(f.into()),
+            uavnav_core::SensorEvent::Mag(m) => Payload::Mag(m.into()),
+            uavnav_core::SensorEvent::Baro(b) => Payload::Baro(b.into()),
             uavnav_core::SensorEvent::Camera(c) => Payload::Camera(c.into()),
         }
     }

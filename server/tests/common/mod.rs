@@ -13,6 +13,17 @@ use uavnav_proto::v1::uav_nav_client::UavNavClient;
 use uavnavd::engine::{Engine, EngineError, EngineFactory, EngineHealth, EngineStep, VisionResult};
 use uavnavd::{Config, RunningServer, Server};
 
+/// What echo engines were given, shared with the test that made their factory.
+#[derive(Debug, Default)]
+pub struct Seen {
+    /// Magnetometer samples, in the order the engines got them.
+    pub mag: std::sync::Mutex<Vec<uavnav_core::MagSample>>,
+    /// Barometer samples.
+    pub baro: std::sync::Mutex<Vec<uavnav_core::BaroSample>>,
+    /// GNSS fixes.
+    pub gnss: std::sync::Mutex<Vec<GnssFix>>,
+}
+
 /// Emits a pose per IMU sample (position = last GNSS fix), runs a trivial vision job per frame.
 /// (Unlike the real runner it does not hold inputs behind a vision job.)
 #[derive(Debug, Default)]
@@ -20,6 +31,7 @@ pub struct EchoEngine {
     last_fix: Option<GnssFix>,
     frames: u32,
     t_ns: i64,
+    seen: Option<Arc<Seen>>,
 }
 
 impl Engine for EchoEngine {
@@ -45,7 +57,22 @@ impl Engine for EchoEngine {
                     ..Default::default()
                 });
             }
-            SensorEvent::Gnss(f) => self.last_fix = Some(f),
+            SensorEvent::Gnss(f) => {
+                self.last_fix = Some(f);
+                if let Some(seen) = &self.seen {
+                    seen.gnss.lock().unwrap().push(f);
+                }
+            }
+            SensorEvent::Mag(m) => {
+                if let Some(seen) = &self.seen {
+                    seen.mag.lock().unwrap().push(m);
+                }
+            }
+            SensorEvent::Baro(b) => {
+                if let Some(seen) = &self.seen {
+                    seen.baro.lock().unwrap().push(b);
+                }
+            }
             SensorEvent::Camera(frame) => {
                 let t_ns = frame.t_ns;
                 step.work = Some(Box::new(move || {
@@ -77,7 +104,10 @@ impl Engine for EchoEngine {
     }
 
     fn reset(&mut self) {
-        *self = Self::default();
+        *self = Self {
+            seen: self.seen.take(),
+            ..Self::default()
+        };
     }
 }
 
@@ -98,6 +128,19 @@ pub struct EchoFactory;
 impl EngineFactory for EchoFactory {
     fn create(&self, _config: &VehicleConfig) -> Box<dyn Engine> {
         Box::new(EchoEngine::default())
+    }
+}
+
+/// Builds [`EchoEngine`]s that report what they were given to one [`Seen`].
+#[derive(Debug, Default)]
+pub struct SeeingFactory(pub Arc<Seen>);
+
+impl EngineFactory for SeeingFactory {
+    fn create(&self, _config: &VehicleConfig) -> Box<dyn Engine> {
+        Box::new(EchoEngine {
+            seen: Some(Arc::clone(&self.0)),
+            ..EchoEngine::default()
+        })
     }
 }
 
@@ -156,7 +199,10 @@ pub fn fix(t_ns: i64) -> pb::GnssFix {
         altitude_m: 300.0,
         sigma_horizontal_m: 1.0,
         sigma_vertical_m: 2.0,
-        sigma_velocity_mps: 0.1,
+        vel_north_mps: Some(0.0),
+        vel_east_mps: Some(0.0),
+        vel_down_mps: Some(0.0),
+        sigma_velocity_mps: Some(0.1),
         fix_type: pb::FixType::Fix3d as i32,
         num_satellites: 10,
         ..Default::default()
@@ -185,6 +231,7 @@ pub fn vehicle_config(camera: bool) -> pb::VehicleConfig {
         gnss: Some(pb::GnssConfig {
             rate_hz: 5.0,
             lever_arm_body_m: Some(pb::Vector3::default()),
+            ..Default::default()
         }),
         camera: camera.then(|| pb::CameraConfig {
             camera_id: 0,
@@ -207,6 +254,45 @@ pub fn vehicle_config(camera: bool) -> pb::VehicleConfig {
         }),
         terrain_elevation_m: 0.0,
         profile: pb::FilterProfile::Eskf as i32,
+        mag: None,
+        baro: None,
+    }
+}
+
+/// A magnetometer sample (a mid-latitude Earth field, tesla).
+pub fn mag(t_ns: i64) -> pb::MagSample {
+    pb::MagSample {
+        t_ns,
+        field_x_t: 2.2e-5,
+        field_y_t: 0.1e-5,
+        field_z_t: 4.1e-5,
+    }
+}
+
+/// A barometer sample.
+pub fn baro(t_ns: i64) -> pb::BaroSample {
+    pb::BaroSample {
+        t_ns,
+        pressure_pa: 97_700.0,
+        temperature_degc: Some(21.5),
+    }
+}
+
+/// A magnetometer envelope.
+pub fn mag_env(id: &str, seq: u64, m: pb::MagSample) -> pb::SensorEnvelope {
+    pb::SensorEnvelope {
+        vehicle_id: id.into(),
+        sequence: seq,
+        payload: Some(pb::sensor_envelope::Payload::Mag(m)),
+    }
+}
+
+/// A barometer envelope.
+pub fn baro_env(id: &str, seq: u64, b: pb::BaroSample) -> pb::SensorEnvelope {
+    pb::SensorEnvelope {
+        vehicle_id: id.into(),
+        sequence: seq,
+        payload: Some(pb::sensor_envelope::Payload::Baro(b)),
     }
 }
 

@@ -114,6 +114,14 @@ impl McapSink {
                 Ok(m) => w.write_message(vehicle_id, Stream::Gnss, &m, m.t_ns, log_time_ns),
                 Err(_) => return Ok(false),
             },
+            Leaf::Mag => match pb::MagSample::decode(bytes) {
+                Ok(m) => w.write_message(vehicle_id, Stream::Mag, &m, m.t_ns, log_time_ns),
+                Err(_) => return Ok(false),
+            },
+            Leaf::Baro => match pb::BaroSample::decode(bytes) {
+                Ok(m) => w.write_message(vehicle_id, Stream::Baro, &m, m.t_ns, log_time_ns),
+                Err(_) => return Ok(false),
+            },
             Leaf::Camera => match pb::CameraFrame::decode(bytes) {
                 Ok(pb::CameraFrame {
                     t_ns,

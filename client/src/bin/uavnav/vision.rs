@@ -70,6 +70,7 @@ pub fn run(args: Args) -> CliResult {
             SensorEvent::Gnss(g) => {
                 let _ = estimator.push_gnss(&g);
             }
+            SensorEvent::Mag(_) | SensorEvent::Baro(_) => {}
             SensorEvent::Camera(f) => {
                 let prior = match (args.no_imu_aid, frontend.reference_t_ns()) {
                     (false, Some(t0)) => estimator.motion_prior(t0, f.t_ns),
