@@ -15,6 +15,8 @@ pub enum Event {
     Ego(Box<Egomotion>),
     /// Clone the pose at this frame time (frame 0 of a pending egomotion).
     CloneAt(i64),
+    /// A magnetometer sample, field already in the body frame.
+    Mag(i64, nalgebra::Vector3<f64>),
 }
 
 impl Event {
@@ -24,6 +26,7 @@ impl Event {
             Event::Gnss(g) => g.t_ns,
             Event::Ego(e) => e.t1_ns,
             Event::CloneAt(t) => *t,
+            Event::Mag(t, _) => *t,
         }
     }
 
@@ -32,8 +35,9 @@ impl Event {
     fn rank(&self) -> u8 {
         match self {
             Event::Gnss(_) => 0,
-            Event::Ego(_) => 1,
-            Event::CloneAt(_) => 2,
+            Event::Mag(..) => 1,
+            Event::Ego(_) => 2,
+            Event::CloneAt(_) => 3,
         }
     }
 }
@@ -137,7 +141,7 @@ mod tests {
         while let Some(e) = b.pop_until(25) {
             out.push((e.t_ns(), e.rank()));
         }
-        assert_eq!(out, vec![(10, 0), (10, 0), (10, 2), (20, 0)]);
+        assert_eq!(out, vec![(10, 0), (10, 0), (10, 3), (20, 0)]);
         assert_eq!(b.len(), 1);
     }
 }

@@ -4,15 +4,17 @@
 
 use std::collections::VecDeque;
 
-use nalgebra::{Isometry3, Matrix3, Vector3};
+use nalgebra::{Isometry3, Matrix3, UnitQuaternion, Vector2, Vector3};
+use uavnav_core::magnetic::{MagneticField, MagneticModel, decimal_year};
 use uavnav_core::{Egomotion, ImuSample, Lla, LocalFrame, MotionPrior, VehicleConfig};
 
 use crate::aid_sources::gnss_pos::{GnssMeas, GnssPosSource, white_noise};
 use crate::aid_sources::gnss_vel::GnssVelSource;
+use crate::aid_sources::mag_heading::{MagHeadingSource, MagState, heading_from_field};
 use crate::aid_sources::vision::{VisionSource, VisionUse};
 use crate::buffer::{DelayBuffer, Event};
 use crate::health::{Health, Mode, PoseHealth};
-use crate::init::{Initialiser, yaw_from_course};
+use crate::init::{Initialiser, hold_yaw_unknown, set_yaw, yaw_from_course};
 use crate::output::{AidingFlags, PoseOutput, euler_sigma};
 use crate::output_predictor::{OutputPredictor, mean_of};
 use crate::params::EstimatorParams;
@@ -20,6 +22,25 @@ use crate::prediction::{
     ErrorDynamics, GravityCache, ImuMean, ProcessNoise, earth_rate_ned, integrate_nominal,
 };
 use crate::state::{Cov, ErrVec, IP, ITH, IV, N, Nominal, PoseClone, augment_clone, clear_clone};
+use crate::yaw_estimator::YawEstimator;
+
+/// Where the filter's heading came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum HeadingSource {
+    /// Not known yet: the yaw σ is that of a uniform heading and the yaw is not corrected.
+    #[default]
+    Unknown,
+    /// The magnetometer (against the world magnetic model's declination).
+    Magnetometer,
+    /// The yaw estimator (Gaussian sum fed by GNSS velocity and the IMU).
+    YawEstimator,
+    /// The GNSS course (only with `EstimatorParams::course_heading`).
+    Course,
+}
+
+/// UNIX time of 2000-01-01, ns: stamps before it are on another clock (time since boot), and the
+/// date for the magnetic model is unknown.
+const UNIX_2000_NS: i64 = 946_684_800_000_000_000;
 
 /// Covariance-prediction accumulator (PX4 downsampling of the covariance prediction).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -32,6 +53,7 @@ struct CovAccum {
 /// The error-state EKF.
 #[derive(Debug, Clone)]
 pub struct Eskf {
+    config: VehicleConfig,
     params: EstimatorParams,
     lever_b: Vector3<f64>,
     body_from_cam: Option<Isometry3<f64>>,
@@ -49,8 +71,17 @@ pub struct Eskf {
     buffer: DelayBuffer,
     init: Initialiser,
     yaw_aligned: bool,
+    heading: HeadingSource,
     gnss_pos: GnssPosSource,
     gnss_vel: GnssVelSource,
+    body_from_mag: Option<UnitQuaternion<f64>>,
+    mag: MagHeadingSource,
+    /// The model field at the origin and the data's date, and the extra declination σ (rad) for
+    /// a date outside the model's validity or unknown.
+    mag_field: Option<(MagneticField, f64)>,
+    yaw_est: YawEstimator,
+    /// Heading resets from the yaw estimator after alignment.
+    pub yaw_resets: u32,
     vision: VisionSource,
     out: OutputPredictor,
     late_dropped: u64,
@@ -84,6 +115,7 @@ impl Eskf {
             gm_tau_s: params.gnss_pos_tau_s,
         };
         let mut s = Self {
+            config: config.clone(),
             lever_b: config
                 .gnss
                 .map(|g| g.lever_arm_body_m)
@@ -102,8 +134,14 @@ impl Eskf {
             buffer: DelayBuffer::default(),
             init: Initialiser::default(),
             yaw_aligned: false,
+            heading: HeadingSource::Unknown,
             gnss_pos: GnssPosSource::default(),
             gnss_vel: GnssVelSource::default(),
+            body_from_mag: config.mag.map(|m| m.body_from_mag),
+            mag: MagHeadingSource::default(),
+            mag_field: None,
+            yaw_est: YawEstimator::new(params.yaw_estimator),
+            yaw_resets: 0,
             vision: VisionSource::default(),
             out: OutputPredictor::new(),
             late_dropped: 0,
@@ -117,42 +155,30 @@ impl Eskf {
         s
     }
 
-    /// Back to the state right after `new` (same configuration and origin).
+    /// Back to the state right after `new` (same configuration and origin): the filter is
+    /// rebuilt, so no field can be forgotten.
     pub fn reset(&mut self) {
-        let fresh = Self {
-            lever_b: self.lever_b,
-            body_from_cam: self.body_from_cam,
-            gyro_psd: self.gyro_psd,
-            noise: self.noise,
-            origin: self.origin,
-            frame: None,
-            w_ie: Vector3::zeros(),
-            gravity: None,
-            imu: VecDeque::new(),
-            x: None,
-            p: Cov::zeros(),
-            acc: CovAccum::default(),
-            buffer: DelayBuffer::default(),
-            init: Initialiser::default(),
-            yaw_aligned: false,
-            gnss_pos: GnssPosSource::default(),
-            gnss_vel: GnssVelSource::default(),
-            vision: VisionSource::default(),
-            out: OutputPredictor::new(),
-            late_dropped: 0,
-            corrected: false,
-            lla: None,
-            params: self.params.clone(),
-        };
-        *self = fresh;
-        if let Some(o) = self.origin {
-            self.set_frame(o);
-        }
+        *self = Self::new(&self.config, self.params.clone(), self.origin);
     }
 
     fn set_frame(&mut self, origin: Lla) {
         self.frame = Some(LocalFrame::new(origin));
         self.w_ie = earth_rate_ned(origin.lat_rad);
+    }
+
+    /// Where the heading came from.
+    pub fn heading_source(&self) -> HeadingSource {
+        self.heading
+    }
+
+    /// The magnetometer heading source (state, diagnostics).
+    pub fn mag_source(&self) -> &MagHeadingSource {
+        &self.mag
+    }
+
+    /// The yaw estimator (diagnostics).
+    pub fn yaw_estimator(&self) -> &YawEstimator {
+        &self.yaw_est
     }
 
     /// The local frame, once known.
@@ -197,6 +223,20 @@ impl Eskf {
             self.noise.gm_psd = [2.0 * h2 / tau, 2.0 * h2 / tau, 2.0 * v2 / tau];
         }
         if !self.buffer.push(Event::Gnss(meas)) {
+            self.late_dropped += 1;
+        }
+    }
+
+    /// Adds a magnetometer sample (already validated; sensor frame) to the delay buffer.
+    pub fn push_mag(&mut self, m: &uavnav_core::MagSample) {
+        let Some(r) = self.body_from_mag else {
+            return;
+        };
+        if self.horizon_t_ns().is_some_and(|h| m.t_ns <= h) {
+            self.late_dropped += 1;
+            return;
+        }
+        if !self.buffer.push(Event::Mag(m.t_ns, r * m.field_t)) {
             self.late_dropped += 1;
         }
     }
@@ -265,6 +305,10 @@ impl Eskf {
             self.process(e, &a, &b);
         }
         self.integrate_to(&a, &b, b.t_ns);
+        let dt_s = (b.t_ns - a.t_ns) as f64 * 1e-9;
+        let bg = self.x.as_ref().map_or_else(Vector3::zeros, |x| x.bg);
+        let m = mean_of(&a, &b);
+        self.yaw_est.predict(&(m.gyro - bg), &m.accel, dt_s);
         self.imu.pop_front();
         if self.x.is_none() {
             self.init.add_imu(
@@ -322,7 +366,12 @@ impl Eskf {
     }
 
     fn inject(&mut self, dx: Option<ErrVec>) {
-        if let (Some(dx), Some(x)) = (dx, self.x.as_mut()) {
+        if let (Some(mut dx), Some(x)) = (dx, self.x.as_mut()) {
+            if !self.yaw_aligned {
+                // An unknown heading is not estimated (see `HeadingSource::Unknown`).
+                dx[ITH + 2] = 0.0;
+                hold_yaw_unknown(&mut self.p);
+            }
             x.inject(&dx);
             self.corrected = true;
         }
@@ -332,6 +381,7 @@ impl Eskf {
     fn process(&mut self, e: Event, a: &ImuSample, b: &ImuSample) {
         if self.x.is_none() {
             if let Event::Gnss(m) = e {
+                self.feed_yaw_estimator(&m);
                 self.try_init(&m);
             }
             return;
@@ -339,6 +389,7 @@ impl Eskf {
         self.flush_cov();
         match e {
             Event::Gnss(m) => self.fuse_gnss(&m, &interp(a, b, m.t_ns)),
+            Event::Mag(t, m_b) => self.fuse_mag(t, &m_b),
             Event::CloneAt(t) => self.take_clone(t),
             Event::Ego(m) => self.fuse_vision(&m),
         }
@@ -362,23 +413,133 @@ impl Eskf {
             self.x = Some(r.x);
             self.p = r.p;
             self.yaw_aligned = r.yaw_aligned;
+            self.heading = if r.yaw_aligned {
+                HeadingSource::Course
+            } else {
+                hold_yaw_unknown(&mut self.p);
+                HeadingSource::Unknown
+            };
             self.acc = CovAccum::default();
             self.corrected = true;
         }
     }
 
-    fn fuse_gnss(&mut self, m: &GnssMeas, imu: &ImuSample) {
-        let Some(x) = self.x else { return };
-        if !self.yaw_aligned
-            && let Some(v) = m.vel_ned_mps
-            && v.xy().norm() >= self.params.init_min_speed_mps
-        {
-            if let Some(xm) = self.x.as_mut() {
-                yaw_from_course(xm, &mut self.p, &v, &self.params);
-            }
-            self.yaw_aligned = true;
-            self.corrected = true;
+    fn feed_yaw_estimator(&mut self, m: &GnssMeas) {
+        if let Some(v) = m.vel_ned_mps {
+            self.yaw_est
+                .fuse_velocity(m.t_ns, Vector2::new(v.x, v.y), m.sigma_vel_mps);
         }
+    }
+
+    /// Aligns an unknown heading from the yaw estimator (or the course when allowed), and resets
+    /// an estimator-aligned heading that GNSS velocity keeps contradicting.
+    fn manage_heading(&mut self, m: &GnssMeas) {
+        let mag_active = self.mag.state == MagState::Active && self.mag.diag.fused > 0;
+        let gsf = self.yaw_est.converged_yaw();
+        if !self.yaw_aligned {
+            if let (Some((yaw, sigma)), Some(x)) = (gsf, self.x.as_mut()) {
+                set_yaw(x, &mut self.p, yaw, sigma.max(self.params.init_yaw_sigma_rad * 0.5));
+                self.yaw_aligned = true;
+                self.heading = HeadingSource::YawEstimator;
+                self.corrected = true;
+            } else if self.params.course_heading
+                && let Some(v) = m.vel_ned_mps
+                && v.xy().norm() >= self.params.init_min_speed_mps
+                && let Some(x) = self.x.as_mut()
+            {
+                yaw_from_course(x, &mut self.p, &v, &self.params);
+                self.yaw_aligned = true;
+                self.heading = HeadingSource::Course;
+                self.corrected = true;
+            }
+            return;
+        }
+        // Emergency reset: GNSS velocity rejected for a while and the yaw estimator confidently
+        // elsewhere (a heading aligned on a wrong hypothesis, or lost in a manoeuvre).
+        let rejected_for = if self.gnss_vel.diag.consecutive_rejects > 0 {
+            m.t_ns - self.gnss_vel.diag.first_reject_t_ns
+        } else {
+            0
+        };
+        if mag_active || rejected_for < self.params.yaw_reset_timeout_ns {
+            return;
+        }
+        if let (Some((yaw, sigma)), Some(x)) = (gsf, self.x.as_mut()) {
+            let (_, _, cur) = x.q.euler_angles();
+            let d = (yaw - cur + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                - std::f64::consts::PI;
+            let s = (self.p[(ITH + 2, ITH + 2)] + sigma * sigma).sqrt();
+            if d.abs() > 3.0 * s {
+                set_yaw(x, &mut self.p, yaw, sigma.max(self.params.init_yaw_sigma_rad * 0.5));
+                self.heading = HeadingSource::YawEstimator;
+                self.yaw_resets += 1;
+                self.corrected = true;
+            }
+        }
+    }
+
+    /// The model field for this flight, computed once at the origin and the data's date.
+    fn model_field(&mut self, t_ns: i64) -> Option<(MagneticField, f64)> {
+        if self.mag_field.is_none() {
+            let origin = self.frame.as_ref()?.origin();
+            let (year, extra) = if t_ns > UNIX_2000_NS {
+                let y = decimal_year(t_ns);
+                // Linear secular variation outside 2025–2030: ~0.15° of declination per year.
+                (y, (0.15f64 * MagneticModel::years_outside_validity(y)).to_radians())
+            } else {
+                // Unknown date: mid-validity, with a few years' worth of declination change.
+                (2027.5, 1f64.to_radians())
+            };
+            self.mag_field = Some((MagneticModel::field(&origin, year), extra));
+        }
+        self.mag_field
+    }
+
+    fn fuse_mag(&mut self, t_ns: i64, m_b: &Vector3<f64>) {
+        let Some((field, extra)) = self.model_field(t_ns) else {
+            return;
+        };
+        let Some(x) = self.x else { return };
+        let sigma = self.params.mag_heading_sigma_rad.hypot(extra);
+        if !self.yaw_aligned {
+            if !self.mag.check_alive(m_b)
+                || !self.mag.consistent(
+                    &x,
+                    m_b,
+                    &field,
+                    self.params.mag_max_inclination_error_rad,
+                )
+            {
+                return;
+            }
+            if let (Some(yaw), Some(xm)) = (
+                heading_from_field(&x, m_b, field.declination_rad()),
+                self.x.as_mut(),
+            ) {
+                set_yaw(xm, &mut self.p, yaw, sigma * 2.0);
+                self.yaw_aligned = true;
+                self.heading = HeadingSource::Magnetometer;
+                self.corrected = true;
+            }
+            return;
+        }
+        let dx = self.mag.fuse(
+            &x,
+            &mut self.p,
+            m_b,
+            &field,
+            sigma,
+            self.params.mag_max_inclination_error_rad,
+            self.params.gate_sigma,
+            t_ns,
+        );
+        self.inject(dx);
+    }
+
+    fn fuse_gnss(&mut self, m: &GnssMeas, imu: &ImuSample) {
+        self.feed_yaw_estimator(m);
+        self.manage_heading(m);
+        let Some(x) = self.x else { return };
         let r = white_noise(
             m,
             self.params.gnss_pos_correlated_fraction,

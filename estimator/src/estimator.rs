@@ -144,6 +144,9 @@ impl Estimator {
             return Err(e);
         }
         self.last_mag_t_ns = Some(m.t_ns);
+        if let Profile::Eskf(e) = &mut self.profile {
+            e.push_mag(m);
+        }
         Ok(())
     }
 

@@ -13,9 +13,11 @@ use crate::aid_sources::gnss_pos::GnssMeas;
 use crate::params::EstimatorParams;
 use crate::state::{Cov, IBA, IBG, IGM, IP, ITH, IV, Nominal};
 
-/// Yaw σ used before a course is available, rad (a wide prior; the linearisation is poor until
-/// the course re-alignment, which is why it happens as soon as the vehicle moves).
-pub const UNALIGNED_YAW_SIGMA_RAD: f64 = 1.0;
+/// Yaw σ while the heading is unknown, rad: that of a heading uniform round the circle (π/√3),
+/// so the stated σ covers the truth whatever it is. The filter does not correct its yaw while
+/// unaligned (the linearisation is meaningless that far out); the magnetometer or the yaw
+/// estimator aligns it.
+pub const UNALIGNED_YAW_SIGMA_RAD: f64 = std::f64::consts::PI / 1.732_050_807_568_877_2;
 
 /// Collects what the initial alignment needs.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -78,7 +80,7 @@ impl Initialiser {
             _ => Vector3::zeros(),
         };
         let speed_h = v_fix.xy().norm();
-        let yaw_aligned = speed_h >= params.init_min_speed_mps;
+        let yaw_aligned = params.course_heading && speed_h >= params.init_min_speed_mps;
         let yaw = if yaw_aligned {
             v_fix.y.atan2(v_fix.x)
         } else {
@@ -158,17 +160,29 @@ pub fn attitude_from_gravity(
     Some(tilt * heading * level)
 }
 
-/// Re-aligns the heading to the GNSS course keeping roll and pitch (used once the vehicle moves
-/// after a static start); resets the attitude covariance.
+/// Re-aligns the heading to the GNSS course keeping roll and pitch (only with
+/// `EstimatorParams::course_heading`); resets the attitude covariance.
 pub fn yaw_from_course(
     x: &mut Nominal,
     cov: &mut Cov,
     vel_ned: &Vector3<f64>,
     params: &EstimatorParams,
 ) {
+    set_yaw(x, cov, vel_ned.y.atan2(vel_ned.x), params.init_yaw_sigma_rad);
+}
+
+/// Sets the heading keeping roll and pitch, with a fresh, decorrelated attitude covariance.
+pub fn set_yaw(x: &mut Nominal, cov: &mut Cov, yaw: f64, yaw_sigma_rad: f64) {
     let (roll, pitch, _) = x.q.euler_angles();
-    let yaw = vel_ned.y.atan2(vel_ned.x);
     x.q = UnitQuaternion::from_euler_angles(roll, pitch, yaw);
     let tilt = cov[(ITH, ITH)].max(cov[(ITH + 1, ITH + 1)]).sqrt();
-    set_attitude_cov(cov, tilt, params.init_yaw_sigma_rad);
+    set_attitude_cov(cov, tilt, yaw_sigma_rad);
+}
+
+/// Keeps the heading unknown: no correlation with any other state and the variance of a heading
+/// uniform round the circle (the yaw is not estimated until aligned).
+pub fn hold_yaw_unknown(cov: &mut Cov) {
+    cov.row_mut(ITH + 2).fill(0.0);
+    cov.column_mut(ITH + 2).fill(0.0);
+    cov[(ITH + 2, ITH + 2)] = UNALIGNED_YAW_SIGMA_RAD.powi(2);
 }

@@ -13,10 +13,11 @@
 //! | [`eskf`] | the error-state EKF orchestration (horizon stepping, events, outputs) |
 //! | [`state`] | nominal state, error-state layout, injection, stochastic clones |
 //! | [`prediction`] | strapdown mechanization (eqs. 29–31) and block-sparse covariance prediction |
-//! | [`aid_sources`] | GNSS position (eq. 32), GNSS velocity (eq. 33), vision; gated updates |
+//! | [`aid_sources`] | GNSS position (eq. 32), GNSS velocity (eq. 33), magnetometer heading (eq. M1), vision; gated updates |
 //! | [`buffer`] | the delayed-measurement buffer |
 //! | [`output_predictor`] | a pose for every IMU sample from the delayed filter |
 //! | [`init`] | alignment without operator input |
+//! | [`yaw_estimator`] | heading without a magnetometer: a Gaussian sum of yaw hypotheses fed by GNSS velocity |
 //! | [`motion_prior`] | the prior handed to the vision front end |
 //! | [`health`] | [`Health`] (full snapshot), [`PoseHealth`] (with every output) and [`Mode`] |
 //! | [`output`] | [`PoseOutput`], [`AidingFlags`], Euler σ and eq. (31)'s `J` |
@@ -40,6 +41,7 @@ pub mod params;
 pub mod prediction;
 pub mod state;
 pub mod validate;
+pub mod yaw_estimator;
 
 pub use estimator::Estimator;
 pub use health::{Health, Mode, PoseHealth, SourceSummary};

@@ -102,6 +102,24 @@ pub struct EstimatorParams {
     pub paper_direction_cov_scale: f64,
     /// Position σ above which the filter is declared diverged, m.
     pub diverged_pos_sigma_m: f64,
+    /// 1-σ error of a magnetometer heading, rad: calibration residue and motor interference
+    /// (time-correlated, so the filter's yaw σ is never brought below it by the compass alone).
+    /// 0.1 rad: an uncompensated compass near the motors wanders by several degrees
+    /// (the shared ArduPilot copter: 7–15 mG of a 163 mG horizontal field, 1σ).
+    pub mag_heading_sigma_rad: f64,
+    /// A magnetometer sample whose inclination (through the filter's tilt) is further than this
+    /// from the world magnetic model's is disturbed and not fused, rad.
+    pub mag_max_inclination_error_rad: f64,
+    /// Heading-course alignment: use the GNSS course as the heading when the yaw estimator has not
+    /// converged and the vehicle moves faster than `init_min_speed_mps`. Only right for a vehicle
+    /// that flies nose first (a fixed wing); a multirotor flies sideways and backwards, so the
+    /// default is `false` and the heading comes from the magnetometer or the yaw estimator.
+    pub course_heading: bool,
+    /// Tuning of the yaw estimator (Gaussian sum of heading hypotheses).
+    pub yaw_estimator: crate::yaw_estimator::YawEstimatorParams,
+    /// With the heading aligned from the yaw estimator and no magnetometer: GNSS velocity rejected
+    /// this long while the yaw estimator disagrees beyond 3σ resets the heading to it, ns.
+    pub yaw_reset_timeout_ns: i64,
 }
 
 impl Default for EstimatorParams {
@@ -135,6 +153,11 @@ impl Default for EstimatorParams {
             paper_video_direction: true,
             paper_direction_cov_scale: 1.0,
             diverged_pos_sigma_m: 5_000.0,
+            mag_heading_sigma_rad: 0.1,
+            mag_max_inclination_error_rad: 10f64.to_radians(),
+            course_heading: false,
+            yaw_estimator: crate::yaw_estimator::YawEstimatorParams::default(),
+            yaw_reset_timeout_ns: 1_000_000_000,
         }
     }
 }

@@ -1,0 +1,366 @@
+//! Heading without a magnetometer and without assuming heading = course: a Gaussian sum of small
+//! yaw filters fed by the IMU and the GNSS velocity (the idea of PX4's EKF-GSF yaw estimator,
+//! derived and written here).
+//!
+//! Each of [`N_MODELS`] hypotheses starts at a different heading round the circle and owns
+//! * an attitude `nav_from_body` propagated with the gyros, its tilt corrected towards the
+//!   measured specific force minus the kinematic acceleration from the GNSS velocity (rotated into
+//!   the body with the hypothesis' own heading, so a turning or accelerating vehicle does not
+//!   tilt the hypothesis that is right);
+//! * a 3-state EKF `x = [v_N, v_E, ψ]`: the horizontal specific force rotated with the
+//!   hypothesis' attitude integrates the velocity,
+//!   `v̇_h = Rz(ψ) a_l` (`a_l` the level-frame horizontal specific force), so
+//!   `∂v̇_h/∂ψ = [−a_E, a_N]` in NED; the GNSS horizontal velocity updates it.
+//!
+//! Each GNSS velocity weighs the hypotheses by their innovation likelihood
+//! `N(y; 0, S) = exp(−½ yᵀS⁻¹y) / (2π √det S)`. When the vehicle accelerates horizontally (hover
+//! corrections, turns, sideways or backward flight alike) the wrong headings predict the wrong
+//! velocity change and lose weight; in constant-velocity flight nothing distinguishes them and
+//! the composite σ stays wide, so the main filter is never told a heading it does not have. The
+//! composite heading is the weighted circular mean, its variance the weighted spread plus the
+//! weighted model variances. Pure and allocation-free: ~5 quaternion and 3×3 updates per IMU
+//! sample.
+
+use std::f64::consts::{PI, TAU};
+
+use nalgebra::{Matrix2, Matrix3, UnitQuaternion, Vector2, Vector3};
+
+/// Number of heading hypotheses (72° apart: each EKF's linearisation covers ±36°).
+pub const N_MODELS: usize = 5;
+
+/// Tuning of the yaw estimator, with documented defaults.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct YawEstimatorParams {
+    /// Horizontal specific-force noise of each model, m/s²: vibration, tilt error and the
+    /// neglected accelerometer bias; generous, since an over-confident model bank locks onto a
+    /// wrong heading.
+    pub accel_sigma_mps2: f64,
+    /// Yaw-rate noise, rad/s (gyro noise and bias).
+    pub yaw_rate_sigma_radps: f64,
+    /// Floor of the GNSS velocity σ used in the update, m/s.
+    pub min_vel_sigma_mps: f64,
+    /// Tilt-correction gain of each model's attitude, rad/s per unit error.
+    pub tilt_gain: f64,
+    /// Composite yaw σ below which the heading counts as known, rad.
+    pub converged_sigma_rad: f64,
+}
+
+impl Default for YawEstimatorParams {
+    fn default() -> Self {
+        Self {
+            accel_sigma_mps2: 1.0,
+            yaw_rate_sigma_radps: 0.03,
+            min_vel_sigma_mps: 0.3,
+            tilt_gain: 0.2,
+            converged_sigma_rad: 15f64.to_radians(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Model {
+    q: UnitQuaternion<f64>,
+    v: Vector2<f64>,
+    yaw: f64,
+    p: Matrix3<f64>,
+    weight: f64,
+}
+
+/// The bank of yaw hypotheses.
+#[derive(Debug, Clone, PartialEq)]
+pub struct YawEstimator {
+    params: YawEstimatorParams,
+    models: [Model; N_MODELS],
+    /// Tilt from averaged specific force before the first GNSS velocity.
+    f_mean: Vector3<f64>,
+    f_count: u32,
+    started: bool,
+    last_vel: Option<(i64, Vector2<f64>)>,
+    /// Kinematic horizontal acceleration from consecutive GNSS velocities (NED), low-passed.
+    accel_kin: Vector2<f64>,
+    /// Horizontal specific-force energy integrated since start: how much the vehicle has
+    /// manoeuvred (diagnostics).
+    pub manoeuvre_mps2s: f64,
+}
+
+impl Default for YawEstimator {
+    fn default() -> Self {
+        Self::new(YawEstimatorParams::default())
+    }
+}
+
+fn wrap_pi(a: f64) -> f64 {
+    (a + PI).rem_euclid(TAU) - PI
+}
+
+impl YawEstimator {
+    /// An idle bank; it starts at the first GNSS velocity after some IMU samples.
+    pub fn new(params: YawEstimatorParams) -> Self {
+        let m = Model {
+            q: UnitQuaternion::identity(),
+            v: Vector2::zeros(),
+            yaw: 0.0,
+            p: Matrix3::zeros(),
+            weight: 1.0 / N_MODELS as f64,
+        };
+        Self {
+            params,
+            models: [m; N_MODELS],
+            f_mean: Vector3::zeros(),
+            f_count: 0,
+            started: false,
+            last_vel: None,
+            accel_kin: Vector2::zeros(),
+            manoeuvre_mps2s: 0.0,
+        }
+    }
+
+    /// Whether the bank runs (after its first GNSS velocity).
+    pub fn started(&self) -> bool {
+        self.started
+    }
+
+    /// Propagates every model over one IMU interval with the mean rates and specific force.
+    pub fn predict(&mut self, gyro: &Vector3<f64>, accel: &Vector3<f64>, dt_s: f64) {
+        if !(dt_s > 0.0 && dt_s < 1.0) {
+            return;
+        }
+        if !self.started {
+            // Level from the averaged specific force until the bank starts.
+            self.f_mean += accel;
+            self.f_count += 1;
+            return;
+        }
+        let g = 9.80665;
+        let f_exp_nav = Vector3::new(self.accel_kin.x, self.accel_kin.y, -g);
+        let f_norm = accel.norm();
+        // Trust the accelerometer's direction less the further its magnitude is from what the
+        // kinematics say (vibration, un-modelled vertical acceleration).
+        let dev = ((f_norm - f_exp_nav.norm()) / g).abs();
+        let gain = if dev < 0.5 {
+            self.params.tilt_gain * (1.0 - 2.0 * dev)
+        } else {
+            0.0
+        };
+        let qa = self.params.accel_sigma_mps2.powi(2) * dt_s * dt_s;
+        let qy = self.params.yaw_rate_sigma_radps.powi(2) * dt_s;
+        for m in &mut self.models {
+            let mut w = *gyro;
+            if gain > 0.0 && f_norm > 1.0 {
+                let f_exp_b = m.q.inverse_transform_vector(&f_exp_nav);
+                let e = (accel / f_norm).cross(&f_exp_b.normalize());
+                w += e * gain;
+            }
+            let yaw_before = m.q.euler_angles().2;
+            m.q *= UnitQuaternion::from_scaled_axis(w * dt_s);
+            let f_nav = m.q.transform_vector(accel);
+            let dv = Vector2::new(f_nav.x, f_nav.y) * dt_s;
+            m.v += dv;
+            m.yaw = wrap_pi(m.yaw + wrap_pi(m.q.euler_angles().2 - yaw_before));
+            // F = [[1,0,−a_E dt],[0,1,a_N dt],[0,0,1]]
+            let (c0, c1) = (-dv.y, dv.x);
+            let p = m.p;
+            let mut n = p;
+            // P' = F P Fᵀ + Q with F = I + e₀c0 e₂ᵀ + e₁c1 e₂ᵀ
+            for i in 0..3 {
+                n[(0, i)] += c0 * p[(2, i)];
+                n[(1, i)] += c1 * p[(2, i)];
+            }
+            let m2 = n;
+            for i in 0..3 {
+                n[(i, 0)] = m2[(i, 0)] + c0 * m2[(i, 2)];
+                n[(i, 1)] = m2[(i, 1)] + c1 * m2[(i, 2)];
+            }
+            n[(0, 0)] += qa;
+            n[(1, 1)] += qa;
+            n[(2, 2)] += qy;
+            m.p = n;
+        }
+    }
+
+    /// Fuses a GNSS horizontal velocity (NED, m/s) with its 1-σ per axis at time `t_ns`.
+    pub fn fuse_velocity(&mut self, t_ns: i64, v: Vector2<f64>, sigma_mps: f64) {
+        if !v.iter().all(|x| x.is_finite()) {
+            return;
+        }
+        let sigma = sigma_mps.max(self.params.min_vel_sigma_mps);
+        if let Some((t0, v0)) = self.last_vel {
+            let dt = (t_ns - t0) as f64 * 1e-9;
+            if dt > 0.05 && dt < 2.0 {
+                let a = (v - v0) / dt;
+                // low-pass: GNSS velocity differences are noisy
+                self.accel_kin += (a - self.accel_kin) * 0.5;
+                self.manoeuvre_mps2s += a.norm() * dt;
+            } else {
+                self.accel_kin = Vector2::zeros();
+            }
+        }
+        self.last_vel = Some((t_ns, v));
+        if !self.started {
+            self.start(v, sigma);
+            return;
+        }
+        let r = sigma * sigma;
+        let mut like = [0.0; N_MODELS];
+        for (k, m) in self.models.iter_mut().enumerate() {
+            let y = v - m.v;
+            let s = Matrix2::new(
+                m.p[(0, 0)] + r,
+                m.p[(0, 1)],
+                m.p[(1, 0)],
+                m.p[(1, 1)] + r,
+            );
+            let Some(si) = s.try_inverse() else { continue };
+            let det = s.determinant().max(1e-12);
+            let nis = (y.transpose() * si * y)[(0, 0)];
+            like[k] = (-0.5 * nis.min(200.0)).exp() / (TAU * det.sqrt());
+            // K = P Hᵀ S⁻¹ with H = [I₂ 0]
+            let pht = m.p.fixed_view::<3, 2>(0, 0).into_owned();
+            let kg = pht * si;
+            let dx = kg * y;
+            m.v += Vector2::new(dx[0], dx[1]);
+            let dyaw = dx[2];
+            m.yaw = wrap_pi(m.yaw + dyaw);
+            m.q = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), dyaw) * m.q;
+            let mut p = m.p - kg * pht.transpose();
+            p = (p + p.transpose()) * 0.5;
+            m.p = p;
+        }
+        let total: f64 = self
+            .models
+            .iter()
+            .zip(like)
+            .map(|(m, l)| m.weight * l)
+            .sum();
+        if total > 0.0 && total.is_finite() {
+            for (m, l) in self.models.iter_mut().zip(like) {
+                m.weight = m.weight * l / total;
+            }
+        }
+        // Floor: a hypothesis that lost once must be able to come back (a wrong early decision
+        // during a take-off transient).
+        let floor = 1e-3 / N_MODELS as f64;
+        let mut sum = 0.0;
+        for m in &mut self.models {
+            m.weight = m.weight.max(floor);
+            sum += m.weight;
+        }
+        for m in &mut self.models {
+            m.weight /= sum;
+        }
+    }
+
+    fn start(&mut self, v: Vector2<f64>, sigma: f64) {
+        let f = if self.f_count > 0 {
+            self.f_mean / self.f_count as f64
+        } else {
+            Vector3::new(0.0, 0.0, -9.81)
+        };
+        let roll = (-f.y).atan2(-f.z);
+        let pitch = f.x.atan2(f.y.hypot(f.z));
+        let spread = TAU / N_MODELS as f64;
+        for (k, m) in self.models.iter_mut().enumerate() {
+            let yaw = wrap_pi(k as f64 * spread);
+            m.q = UnitQuaternion::from_euler_angles(roll, pitch, yaw);
+            m.yaw = yaw;
+            m.v = v;
+            m.p = Matrix3::from_diagonal(&Vector3::new(
+                sigma * sigma,
+                sigma * sigma,
+                (0.5 * spread).powi(2),
+            ));
+            m.weight = 1.0 / N_MODELS as f64;
+        }
+        self.started = true;
+    }
+
+    /// The composite heading and its σ, rad (`None` before the bank starts).
+    pub fn yaw(&self) -> Option<(f64, f64)> {
+        if !self.started {
+            return None;
+        }
+        let (s, c) = self.models.iter().fold((0.0, 0.0), |(s, c), m| {
+            (s + m.weight * m.yaw.sin(), c + m.weight * m.yaw.cos())
+        });
+        let mean = s.atan2(c);
+        let var: f64 = self
+            .models
+            .iter()
+            .map(|m| m.weight * (wrap_pi(m.yaw - mean).powi(2) + m.p[(2, 2)]))
+            .sum();
+        Some((mean, var.max(0.0).sqrt()))
+    }
+
+    /// The heading when the bank has converged (σ below the threshold).
+    pub fn converged_yaw(&self) -> Option<(f64, f64)> {
+        self.yaw()
+            .filter(|&(_, s)| s < self.params.converged_sigma_rad)
+    }
+
+    /// The models' weights (diagnostics).
+    pub fn weights(&self) -> [f64; N_MODELS] {
+        self.models.map(|m| m.weight)
+    }
+
+    /// Sets every model's heading and spread anew around the bank's own state (after the main
+    /// filter took the heading, the bank keeps running: nothing to do) — or restarts it.
+    pub fn restart(&mut self) {
+        *self = Self::new(self.params);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A vehicle with heading `yaw0` flying a sideways-and-back pattern (body-frame accelerations
+    /// only sideways: a course-based heading would be 90° off).
+    fn fly(yaw0: f64) -> YawEstimator {
+        let mut e = YawEstimator::default();
+        let dt = 0.01;
+        let q = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw0);
+        let mut v = Vector2::zeros();
+        for k in 0..6000 {
+            let t = k as f64 * dt;
+            // body acceleration along +y (right), sinusoidal: 1.5 m/s² peak, 8 s period
+            let a_b = Vector3::new(0.0, 1.5 * (TAU * t / 8.0).sin(), 0.0);
+            let a_n = q.transform_vector(&a_b);
+            v += Vector2::new(a_n.x, a_n.y) * dt;
+            let f_b = a_b - q.inverse_transform_vector(&Vector3::new(0.0, 0.0, 9.80665));
+            e.predict(&Vector3::zeros(), &f_b, dt);
+            if k % 20 == 0 {
+                e.fuse_velocity((t * 1e9) as i64, v, 0.2);
+            }
+        }
+        e
+    }
+
+    #[test]
+    fn converges_from_every_heading_flying_sideways() {
+        for i in 0..12 {
+            let yaw0 = wrap_pi(i as f64 * TAU / 12.0 + 0.1);
+            let e = fly(yaw0);
+            let (yaw, sigma) = e.converged_yaw().expect("converged");
+            assert!(
+                wrap_pi(yaw - yaw0).abs() < 5f64.to_radians(),
+                "truth {:.1} est {:.1} sigma {:.1}",
+                yaw0.to_degrees(),
+                yaw.to_degrees(),
+                sigma.to_degrees()
+            );
+        }
+    }
+
+    #[test]
+    fn stays_uncertain_without_acceleration() {
+        let mut e = YawEstimator::default();
+        let f_b = Vector3::new(0.0, 0.0, -9.80665);
+        for k in 0..3000 {
+            e.predict(&Vector3::zeros(), &f_b, 0.01);
+            if k % 20 == 0 {
+                e.fuse_velocity(k * 10_000_000, Vector2::new(10.0, 0.0), 0.2);
+            }
+        }
+        assert!(e.converged_yaw().is_none(), "{:?}", e.yaw());
+    }
+}

@@ -1,0 +1,142 @@
+//! The shared real ArduPilot flights (`../shared/data/real_flights`), scored as the estimator
+//! issue states: attitude against the autopilot's EKF1 (a reference, not truth) from 30 s after
+//! the first pose, horizontal position against the raw fixes, yaw consistency, σ sanity. Each test
+//! skips with a message when the shared data is absent.
+//!
+//! Run with `--nocapture` to see the figures.
+
+mod real;
+
+use real::{RealFlight, Score, Use, flight_dir, run, score};
+use uavnav_core::FilterProfile;
+use uavnav_estimator::EstimatorParams;
+
+const S: i64 = 1_000_000_000;
+
+fn scored(name: &str, profile: FilterProfile, use_: Use, end_after_first_imu_s: Option<i64>) -> Option<Score> {
+    let dir = flight_dir(name)?;
+    let f = RealFlight::read(&dir);
+    let poses = run(&f, profile, EstimatorParams::default(), use_);
+    let first = poses.first().map(|p| p.t_ns)?;
+    let end = end_after_first_imu_s.map_or(i64::MAX, |e| f.imu[0].t_ns + e * S);
+    let s = score(&f, &poses, first + 30 * S, end);
+    eprintln!("{name} {profile:?} mag={} baro={}: {s}", use_.mag, use_.baro);
+    Some(s)
+}
+
+const ALL: Use = Use {
+    mag: true,
+    baro: true,
+};
+const NO_MAG: Use = Use {
+    mag: false,
+    baro: true,
+};
+
+#[test]
+fn copter_218_all_sensors() {
+    let Some(s) = scored("erle_copter_218", FilterProfile::Eskf, ALL, None) else {
+        return;
+    };
+    assert_eq!(s.bad_sigma_rows, 0, "{s}");
+}
+
+#[test]
+fn copter_218_without_magnetometer() {
+    let Some(s) = scored("erle_copter_218", FilterProfile::Eskf, NO_MAG, None) else {
+        return;
+    };
+    assert_eq!(s.bad_sigma_rows, 0, "{s}");
+}
+
+#[test]
+fn copter_103_dead_compass() {
+    // Roll and pitch against EKF1 up to 163 s (the reference's yaw is unknown on this flight).
+    let Some(s) = scored("erle_copter_103", FilterProfile::Eskf, ALL, Some(163)) else {
+        return;
+    };
+    assert_eq!(s.bad_sigma_rows, 0, "{s}");
+}
+
+#[test]
+fn plane_e() {
+    let Some(s) = scored("erle_plane_E", FilterProfile::Eskf, ALL, None) else {
+        return;
+    };
+    assert_eq!(s.bad_sigma_rows, 0, "{s}");
+}
+
+#[test]
+fn paper_profile_never_diverges_silently() {
+    for name in ["erle_copter_218", "erle_copter_103", "erle_plane_E"] {
+        let Some(s) = scored(name, FilterProfile::Paper, ALL, None) else {
+            return;
+        };
+        let _ = s;
+    }
+}
+
+/// Diagnostics: `UAVNAV_TRACE=erle_copter_218 cargo test -p uavnav-estimator --test real_flights trace -- --nocapture`
+#[test]
+fn trace() {
+    let Ok(name) = std::env::var("UAVNAV_TRACE") else {
+        return;
+    };
+    let Some(dir) = flight_dir(&name) else { return };
+    let f = RealFlight::read(&dir);
+    let mut config = f.config.clone();
+    if std::env::var("UAVNAV_NO_MAG").is_ok() {
+        config.mag = None;
+    }
+    let mut est = uavnav_estimator::Estimator::new(&config, EstimatorParams::default(), None);
+    let mut ev: Vec<(i64, u8, usize)> = Vec::new();
+    ev.extend(f.imu.iter().enumerate().map(|(i, s)| (s.t_ns, 0, i)));
+    ev.extend(f.gnss.iter().enumerate().map(|(i, s)| (s.t_ns, 1, i)));
+    if config.mag.is_some() {
+        ev.extend(f.mag.iter().enumerate().map(|(i, s)| (s.t_ns, 2, i)));
+    }
+    ev.sort();
+    let t0 = f.imu[0].t_ns;
+    let mut next = t0;
+    let mut j = 0;
+    for (_, k, i) in ev {
+        let p = match k {
+            0 => est.push_imu(&f.imu[i]).ok().flatten(),
+            1 => {
+                let _ = est.push_gnss(&f.gnss[i]);
+                None
+            }
+            _ => {
+                let _ = est.push_mag(&f.mag[i]);
+                None
+            }
+        };
+        let Some(p) = p else { continue };
+        if p.t_ns < next {
+            continue;
+        }
+        next += 5 * S;
+        while j + 1 < f.reference.len() && f.reference[j + 1].t_ns <= p.t_ns {
+            j += 1;
+        }
+        let ry = f.reference.get(j).map_or(f64::NAN, |r| r.q.euler_angles().2);
+        let e = est.eskf().expect("eskf");
+        let gsf = e.yaw_estimator().yaw();
+        eprintln!(
+            "t {:6.1} yaw {:7.1} ref {:7.1} sig {:5.1} src {:?} mag fused {} rej {} dist {} tr {:.2} gsf {:?} resets {} vel tr {:.2} speed {:.1}",
+            (p.t_ns - t0) as f64 * 1e-9,
+            p.euler_rad.z.to_degrees(),
+            ry.to_degrees(),
+            p.sigma_att_rad.z.to_degrees(),
+            e.heading_source(),
+            e.mag_source().diag.fused,
+            e.mag_source().diag.rejected,
+            e.mag_source().disturbed,
+            e.mag_source().diag.test_ratio,
+            gsf.map(|(y, s)| (y.to_degrees().round(), s.to_degrees().round())),
+            e.yaw_resets,
+            p.health.gnss_vel.test_ratio,
+            p.vel_ned_mps.xy().norm(),
+        );
+    }
+}
