@@ -162,4 +162,46 @@ pub struct VehicleConfig {
     pub terrain_elevation_m: f64,
     /// Fusion architecture.
     pub profile: FilterProfile,
+    /// What kind of vehicle it is: whether its heading may be taken from its course.
+    pub airframe: Airframe,
+}
+
+/// The vehicle's kind, as far as the estimator cares: a fixed wing flies nose first (its heading
+/// is its course up to sideslip and wind crab), a multirotor flies in any direction. This is the
+/// one vehicle-type switch of the estimator, and it is needed: in straight, constant-speed flight
+/// nothing in IMU and GNSS data tells the heading, and only a fixed wing may then take its course.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Airframe {
+    /// Not said: treated as able to fly in any direction (never heading = course).
+    #[default]
+    Unknown,
+    /// Fixed wing (or a VTOL in forward flight).
+    FixedWing,
+    /// Multirotor or helicopter.
+    Multirotor,
+}
+
+impl Airframe {
+    /// The name used in files and on the command line.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Airframe::Unknown => "unknown",
+            Airframe::FixedWing => "fixed_wing",
+            Airframe::Multirotor => "multirotor",
+        }
+    }
+}
+
+impl std::str::FromStr for Airframe {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "unknown" => Ok(Airframe::Unknown),
+            "fixed_wing" => Ok(Airframe::FixedWing),
+            "multirotor" => Ok(Airframe::Multirotor),
+            other => Err(format!(
+                "airframe: unknown value {other:?} (expected unknown, fixed_wing or multirotor)"
+            )),
+        }
+    }
 }

@@ -48,6 +48,10 @@ struct CovAccum {
     dt_s: f64,
     gyro_dt: Vector3<f64>,
     accel_dt: Vector3<f64>,
+    /// Σ of the per-axis variance the IMU data itself shows over the interval (see
+    /// [`Eskf::observed_imu_noise`]), rad² and (m/s)².
+    gyro_var: f64,
+    accel_var: f64,
 }
 
 /// The error-state EKF.
@@ -80,6 +84,9 @@ pub struct Eskf {
     /// a date outside the model's validity or unknown.
     mag_field: Option<(MagneticField, f64)>,
     yaw_est: YawEstimator,
+    /// The heading may be taken from the course (`EstimatorParams::course_heading`, or a fixed
+    /// wing).
+    course_heading: bool,
     /// Heading resets from the yaw estimator after alignment.
     pub yaw_resets: u32,
     vision: VisionSource,
@@ -141,6 +148,8 @@ impl Eskf {
             mag: MagHeadingSource::default(),
             mag_field: None,
             yaw_est: YawEstimator::new(params.yaw_estimator),
+            course_heading: params.course_heading
+                || config.airframe == uavnav_core::Airframe::FixedWing,
             yaw_resets: 0,
             vision: VisionSource::default(),
             out: OutputPredictor::new(),
@@ -306,6 +315,7 @@ impl Eskf {
         }
         self.integrate_to(&a, &b, b.t_ns);
         let dt_s = (b.t_ns - a.t_ns) as f64 * 1e-9;
+        self.observed_imu_noise(&a, &b, dt_s);
         let bg = self.x.as_ref().map_or_else(Vector3::zeros, |x| x.bg);
         let m = mean_of(&a, &b);
         self.yaw_est.predict(&(m.gyro - bg), &m.accel, dt_s);
@@ -346,6 +356,23 @@ impl Eskf {
         }
     }
 
+    /// Real IMUs are noisier in flight than their datasheets (vibration: 10–20× on the shared
+    /// ArduPilot copters), and a logged 10 Hz IMU of a manoeuvring aircraft misses what happens
+    /// between its samples. Both show in the change between consecutive samples: for white noise
+    /// of σ per sample, `E|Δ|² = 2σ²` per axis; for a sampled signal, the integration error of one
+    /// interval is of the order of `|Δ| dt / 2`. The per-axis variance `|Δ|² dt² / 6` of each
+    /// interval is accumulated and used as the process noise where it exceeds the configured
+    /// densities (`flush_cov`), so the filter's confidence follows the data it is given.
+    fn observed_imu_noise(&mut self, a: &ImuSample, b: &ImuSample, dt_s: f64) {
+        if !(dt_s > 0.0) {
+            return;
+        }
+        let dg = (b.gyro_radps - a.gyro_radps).norm_squared();
+        let da = (b.accel_mps2 - a.accel_mps2).norm_squared();
+        self.acc.gyro_var += dg * dt_s * dt_s / 6.0;
+        self.acc.accel_var += da * dt_s * dt_s / 6.0;
+    }
+
     /// Propagates the covariance over the accumulated interval.
     fn flush_cov(&mut self) {
         let Some(x) = self.x.as_ref() else { return };
@@ -357,10 +384,15 @@ impl Eskf {
             gyro: self.acc.gyro_dt / dt,
             accel: self.acc.accel_dt / dt,
         };
+        let noise = ProcessNoise {
+            gyro_psd: self.noise.gyro_psd.max(self.acc.gyro_var / dt),
+            accel_psd: self.noise.accel_psd.max(self.acc.accel_var / dt),
+            ..self.noise
+        };
         ErrorDynamics::new(x, &mean, &self.w_ie, self.params.gnss_pos_tau_s).propagate(
             &mut self.p,
             dt,
-            &self.noise,
+            &noise,
         );
         self.acc = CovAccum::default();
     }
@@ -406,9 +438,11 @@ impl Eskf {
             f.sqrt() * m.sigma_h_m,
             f.sqrt() * m.sigma_v_m,
         ];
-        if let Some(r) = self
-            .init
-            .try_init(m, &self.lever_b, &g, &self.params, gm_sigma)
+        let params = EstimatorParams {
+            course_heading: self.course_heading,
+            ..self.params.clone()
+        };
+        if let Some(r) = self.init.try_init(m, &self.lever_b, &g, &params, gm_sigma)
         {
             self.x = Some(r.x);
             self.p = r.p;
@@ -442,7 +476,7 @@ impl Eskf {
                 self.yaw_aligned = true;
                 self.heading = HeadingSource::YawEstimator;
                 self.corrected = true;
-            } else if self.params.course_heading
+            } else if self.course_heading
                 && let Some(v) = m.vel_ned_mps
                 && v.xy().norm() >= self.params.init_min_speed_mps
                 && let Some(x) = self.x.as_mut()

@@ -121,6 +121,14 @@ fn trace() {
         }
         let ry = f.reference.get(j).map_or(f64::NAN, |r| r.q.euler_angles().2);
         let e = est.eskf().expect("eskf");
+        let fix = f.gnss.iter().min_by_key(|g| (g.t_ns - p.t_ns).abs());
+        let herr = fix.map_or(f64::NAN, |g| {
+            let fr = uavnav_core::LocalFrame::new(p.lla);
+            fr.lla_to_ned(&uavnav_core::Lla::from_deg(g.lat_deg, g.lon_deg, g.alt_m))
+                .xy()
+                .norm()
+        });
+        eprint!("herr {herr:5.1} gm {:?} ", e.nominal().map(|x| x.gm.xy().norm()));
         let gsf = e.yaw_estimator().yaw();
         eprintln!(
             "t {:6.1} yaw {:7.1} ref {:7.1} sig {:5.1} src {:?} mag fused {} rej {} dist {} tr {:.2} gsf {:?} resets {} vel tr {:.2} speed {:.1}",

@@ -160,13 +160,20 @@ pub struct FlightLog {
 
 /// Imports a log from its bytes; the format is recognised from the first bytes.
 pub fn import(data: &[u8], options: &ImportOptions) -> Result<FlightLog, LogError> {
-    if ulog::sniff(data) {
+    let mut log = if ulog::sniff(data) {
         px4::import(data, options)
     } else if dataflash::sniff(data) {
         ardupilot::import(data, options)
     } else {
         Err(LogError::UnknownFormat)
-    }
+    }?;
+    // The estimator takes a fixed wing's heading from its course when nothing else tells it.
+    log.config.airframe = match log.vehicle {
+        VehicleKind::Plane => uavnav_core::Airframe::FixedWing,
+        VehicleKind::Copter => uavnav_core::Airframe::Multirotor,
+        _ => uavnav_core::Airframe::Unknown,
+    };
+    Ok(log)
 }
 
 /// Reads a file and [`import`]s it.

@@ -91,6 +91,7 @@ proptest! {
             camera: Some(camera_config(k, rpy, t)),
             terrain_elevation_m: terrain,
             profile: if paper { FilterProfile::Paper } else { FilterProfile::Eskf },
+            airframe: if paper { uavnav_core::Airframe::FixedWing } else { uavnav_core::Airframe::Multirotor },
         };
         prop_assert_eq!(VehicleConfig::try_from(&v1::VehicleConfig::from(&c)).unwrap(), c);
     }

@@ -178,6 +178,8 @@ impl Flight {
             }),
             terrain_elevation_m: s.terrain.elevation_m,
             profile: Default::default(),
+            // the simulator's trajectories are fixed-wing kinematics (`trajectory`)
+            airframe: uavnav_core::Airframe::FixedWing,
         }
     }
 

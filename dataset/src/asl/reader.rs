@@ -89,6 +89,7 @@ impl AslDataset {
                 camera,
                 terrain_elevation_m: body.terrain_elevation_m,
                 profile: body.profile,
+                airframe: body.airframe,
             },
             origin,
             truth,

@@ -367,6 +367,8 @@ pub struct BodyExtras {
     pub terrain_elevation_m: f64,
     /// Filter profile.
     pub profile: FilterProfile,
+    /// Airframe (`airframe: unknown | fixed_wing | multirotor`).
+    pub airframe: uavnav_core::Airframe,
 }
 
 /// Reads `body.yaml` if present (missing keys take defaults).
@@ -375,6 +377,7 @@ pub fn read_body(path: &Path) -> Result<BodyExtras> {
         vehicle_id: None,
         terrain_elevation_m: 0.0,
         profile: FilterProfile::default(),
+        airframe: uavnav_core::Airframe::default(),
     };
     if !path.exists() {
         return Ok(out);
@@ -393,15 +396,29 @@ pub fn read_body(path: &Path) -> Result<BodyExtras> {
             .parse()
             .map_err(|e: String| DatasetError::parse(path, line, e))?;
     }
+    if y.get("airframe").is_some() {
+        let line = y.get("airframe").map_or(1, |n| n.line);
+        out.airframe = y
+            .str("airframe")?
+            .parse()
+            .map_err(|e: String| DatasetError::parse(path, line, e))?;
+    }
     Ok(out)
 }
 
 /// `body.yaml` text.
-pub fn write_body(vehicle_id: &str, terrain_elevation_m: f64, profile: FilterProfile) -> String {
+pub fn write_body(
+    vehicle_id: &str,
+    terrain_elevation_m: f64,
+    profile: FilterProfile,
+    airframe: uavnav_core::Airframe,
+) -> String {
     format!(
         "%YAML:1.0\ncomment: written by uavnav\nvehicle_id: {vehicle_id}\n\
-         terrain_elevation_m: {} # above the WGS84 ellipsoid, m\nfilter_profile: {}\n",
+         terrain_elevation_m: {} # above the WGS84 ellipsoid, m\nfilter_profile: {}\n\
+         airframe: {} # unknown | fixed_wing | multirotor\n",
         fmt_f64(terrain_elevation_m),
-        profile.as_str()
+        profile.as_str(),
+        airframe.as_str()
     )
 }

@@ -113,7 +113,12 @@ impl AslWriter {
         std::fs::create_dir_all(&mav).map_err(|e| DatasetError::io(&mav, e))?;
         write_file(
             &mav.join(BODY_YAML),
-            &sensor_yaml::write_body(vehicle_id, config.terrain_elevation_m, config.profile),
+            &sensor_yaml::write_body(
+                vehicle_id,
+                config.terrain_elevation_m,
+                config.profile,
+                config.airframe,
+            ),
         )?;
         let imu = Csv::create(&mav.join(IMU), IMU_HEADER)?;
         write_file(

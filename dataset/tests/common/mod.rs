@@ -54,6 +54,7 @@ pub fn config() -> VehicleConfig {
         }),
         terrain_elevation_m: 120.5,
         profile: FilterProfile::Paper,
+        airframe: uavnav_core::Airframe::FixedWing,
     }
 }
 

@@ -1,7 +1,7 @@
 //! Vehicle configuration: IMU noise, GNSS lever arm, camera model and mount, profile.
 
 use uavnav_core::{
-    BaroConfig, CameraConfig, CameraModel, Distortion, FilterProfile, GnssConfig, ImuConfig,
+    Airframe,    BaroConfig, CameraConfig, CameraModel, Distortion, FilterProfile, GnssConfig, ImuConfig,
     MagConfig, VehicleConfig,
 };
 
@@ -217,6 +217,30 @@ pub fn filter_profile(field: &str, raw: i32) -> Result<FilterProfile, ConvertErr
     }
 }
 
+/// Wire airframe → core; `UNSPECIFIED` is `Airframe::Unknown`.
+pub fn airframe(field: &str, raw: i32) -> Result<Airframe, ConvertError> {
+    use v1::Airframe as W;
+    match W::try_from(raw) {
+        Ok(W::Unspecified) => Ok(Airframe::Unknown),
+        Ok(W::FixedWing) => Ok(Airframe::FixedWing),
+        Ok(W::Multirotor) => Ok(Airframe::Multirotor),
+        Err(_) => Err(ConvertError::UnknownEnum {
+            field: field.to_owned(),
+            value: raw,
+        }),
+    }
+}
+
+impl From<Airframe> for v1::Airframe {
+    fn from(a: Airframe) -> Self {
+        match a {
+            Airframe::Unknown => v1::Airframe::Unspecified,
+            Airframe::FixedWing => v1::Airframe::FixedWing,
+            Airframe::Multirotor => v1::Airframe::Multirotor,
+        }
+    }
+}
+
 impl From<FilterProfile> for v1::FilterProfile {
     fn from(p: FilterProfile) -> Self {
         match p {
@@ -263,6 +287,7 @@ impl TryFrom<&v1::VehicleConfig> for VehicleConfig {
             camera,
             terrain_elevation_m: in_range("terrain_elevation_m", c.terrain_elevation_m, lo, hi)?,
             profile: filter_profile("profile", c.profile)?,
+            airframe: airframe("airframe", c.airframe)?,
         })
     }
 }
@@ -277,6 +302,7 @@ impl From<&VehicleConfig> for v1::VehicleConfig {
             baro: c.baro.as_ref().map(Into::into),
             terrain_elevation_m: c.terrain_elevation_m,
             profile: v1::FilterProfile::from(c.profile) as i32,
+            airframe: v1::Airframe::from(c.airframe) as i32,
         }
     }
 }
