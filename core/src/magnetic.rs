@@ -260,7 +260,10 @@ mod tests {
         // 2014-12-05 10:54:52 UTC (the shared copter_218 flight)
         let t = 1_417_776_892_000_000_000_i64;
         let y = decimal_year(t);
-        assert!((y - (2014.0 + (338.0 + 10.914 / 24.0) / 365.0)).abs() < 1e-4, "{y}");
+        assert!(
+            (y - (2014.0 + (338.0 + 10.914 / 24.0) / 365.0)).abs() < 1e-4,
+            "{y}"
+        );
         // 2024-03-01 00:00 UTC: a leap year, day 60
         assert!((decimal_year(1_709_251_200_000_000_000) - (2024.0 + 60.0 / 366.0)).abs() < 1e-9);
     }
@@ -272,8 +275,14 @@ mod tests {
         // land within its secular-variation error of that.
         let lla = Lla::from_deg(42.85, -2.65, 600.0);
         let f = MagneticModel::field(&lla, 2014.93);
-        assert!((f.inclination_rad().to_degrees() - 58.1).abs() < 0.6, "{f:?}");
-        assert!((f.declination_rad().to_degrees() + 0.9).abs() < 1.0, "{f:?}");
+        assert!(
+            (f.inclination_rad().to_degrees() - 58.1).abs() < 0.6,
+            "{f:?}"
+        );
+        assert!(
+            (f.declination_rad().to_degrees() + 0.9).abs() < 1.0,
+            "{f:?}"
+        );
         assert!((f.strength_t() * 1e6 - 45.7).abs() < 0.6, "{f:?}");
         // and in 2025 the declination there has turned east (about +0.6°)
         let f25 = MagneticModel::field(&lla, 2025.5);

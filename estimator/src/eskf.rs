@@ -442,8 +442,7 @@ impl Eskf {
             course_heading: self.course_heading,
             ..self.params.clone()
         };
-        if let Some(r) = self.init.try_init(m, &self.lever_b, &g, &params, gm_sigma)
-        {
+        if let Some(r) = self.init.try_init(m, &self.lever_b, &g, &params, gm_sigma) {
             self.x = Some(r.x);
             self.p = r.p;
             self.yaw_aligned = r.yaw_aligned;
@@ -472,7 +471,12 @@ impl Eskf {
         let gsf = self.yaw_est.converged_yaw();
         if !self.yaw_aligned {
             if let (Some((yaw, sigma)), Some(x)) = (gsf, self.x.as_mut()) {
-                set_yaw(x, &mut self.p, yaw, sigma.max(self.params.init_yaw_sigma_rad * 0.5));
+                set_yaw(
+                    x,
+                    &mut self.p,
+                    yaw,
+                    sigma.max(self.params.init_yaw_sigma_rad * 0.5),
+                );
                 self.yaw_aligned = true;
                 self.heading = HeadingSource::YawEstimator;
                 self.corrected = true;
@@ -504,7 +508,12 @@ impl Eskf {
                 - std::f64::consts::PI;
             let s = (self.p[(ITH + 2, ITH + 2)] + sigma * sigma).sqrt();
             if d.abs() > 3.0 * s {
-                set_yaw(x, &mut self.p, yaw, sigma.max(self.params.init_yaw_sigma_rad * 0.5));
+                set_yaw(
+                    x,
+                    &mut self.p,
+                    yaw,
+                    sigma.max(self.params.init_yaw_sigma_rad * 0.5),
+                );
                 self.heading = HeadingSource::YawEstimator;
                 self.yaw_resets += 1;
                 self.corrected = true;
@@ -519,7 +528,10 @@ impl Eskf {
             let (year, extra) = if t_ns > UNIX_2000_NS {
                 let y = decimal_year(t_ns);
                 // Linear secular variation outside 2025–2030: ~0.15° of declination per year.
-                (y, (0.15f64 * MagneticModel::years_outside_validity(y)).to_radians())
+                (
+                    y,
+                    (0.15f64 * MagneticModel::years_outside_validity(y)).to_radians(),
+                )
             } else {
                 // Unknown date: mid-validity, with a few years' worth of declination change.
                 (2027.5, 1f64.to_radians())
@@ -537,12 +549,9 @@ impl Eskf {
         let sigma = self.params.mag_heading_sigma_rad.hypot(extra);
         if !self.yaw_aligned {
             if !self.mag.check_alive(m_b)
-                || !self.mag.consistent(
-                    &x,
-                    m_b,
-                    &field,
-                    self.params.mag_max_inclination_error_rad,
-                )
+                || !self
+                    .mag
+                    .consistent(&x, m_b, &field, self.params.mag_max_inclination_error_rad)
             {
                 return;
             }

@@ -10,9 +10,7 @@ use crate::health::Health;
 use crate::output::PoseOutput;
 use crate::paper::PaperFilter;
 use crate::params::EstimatorParams;
-use crate::validate::{
-    InputError, check_baro, check_egomotion, check_gnss, check_imu, check_mag,
-};
+use crate::validate::{InputError, check_baro, check_egomotion, check_gnss, check_imu, check_mag};
 
 /// Consecutive continuous samples after a rejected time jump that make the estimator accept the
 /// resumed stream by restarting (a genuine gap, not a glitch).

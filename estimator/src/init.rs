@@ -168,7 +168,12 @@ pub fn yaw_from_course(
     vel_ned: &Vector3<f64>,
     params: &EstimatorParams,
 ) {
-    set_yaw(x, cov, vel_ned.y.atan2(vel_ned.x), params.init_yaw_sigma_rad);
+    set_yaw(
+        x,
+        cov,
+        vel_ned.y.atan2(vel_ned.x),
+        params.init_yaw_sigma_rad,
+    );
 }
 
 /// Sets the heading keeping roll and pitch, with a fresh, decorrelated attitude covariance.

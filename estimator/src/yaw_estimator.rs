@@ -204,12 +204,7 @@ impl YawEstimator {
         let mut like = [0.0; N_MODELS];
         for (k, m) in self.models.iter_mut().enumerate() {
             let y = v - m.v;
-            let s = Matrix2::new(
-                m.p[(0, 0)] + r,
-                m.p[(0, 1)],
-                m.p[(1, 0)],
-                m.p[(1, 1)] + r,
-            );
+            let s = Matrix2::new(m.p[(0, 0)] + r, m.p[(0, 1)], m.p[(1, 0)], m.p[(1, 1)] + r);
             let Some(si) = s.try_inverse() else { continue };
             let det = s.determinant().max(1e-12);
             let nis = (y.transpose() * si * y)[(0, 0)];

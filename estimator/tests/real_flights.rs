@@ -13,14 +13,22 @@ use uavnav_estimator::EstimatorParams;
 
 const S: i64 = 1_000_000_000;
 
-fn scored(name: &str, profile: FilterProfile, use_: Use, end_after_first_imu_s: Option<i64>) -> Option<Score> {
+fn scored(
+    name: &str,
+    profile: FilterProfile,
+    use_: Use,
+    end_after_first_imu_s: Option<i64>,
+) -> Option<Score> {
     let dir = flight_dir(name)?;
     let f = RealFlight::read(&dir);
     let poses = run(&f, profile, EstimatorParams::default(), use_);
     let first = poses.first().map(|p| p.t_ns)?;
     let end = end_after_first_imu_s.map_or(i64::MAX, |e| f.imu[0].t_ns + e * S);
     let s = score(&f, &poses, first + 30 * S, end);
-    eprintln!("{name} {profile:?} mag={} baro={}: {s}", use_.mag, use_.baro);
+    eprintln!(
+        "{name} {profile:?} mag={} baro={}: {s}",
+        use_.mag, use_.baro
+    );
     Some(s)
 }
 
@@ -119,7 +127,10 @@ fn trace() {
         while j + 1 < f.reference.len() && f.reference[j + 1].t_ns <= p.t_ns {
             j += 1;
         }
-        let ry = f.reference.get(j).map_or(f64::NAN, |r| r.q.euler_angles().2);
+        let ry = f
+            .reference
+            .get(j)
+            .map_or(f64::NAN, |r| r.q.euler_angles().2);
         let e = est.eskf().expect("eskf");
         let fix = f.gnss.iter().min_by_key(|g| (g.t_ns - p.t_ns).abs());
         let herr = fix.map_or(f64::NAN, |g| {
@@ -128,7 +139,10 @@ fn trace() {
                 .xy()
                 .norm()
         });
-        eprint!("herr {herr:5.1} gm {:?} ", e.nominal().map(|x| x.gm.xy().norm()));
+        eprint!(
+            "herr {herr:5.1} gm {:?} ",
+            e.nominal().map(|x| x.gm.xy().norm())
+        );
         let gsf = e.yaw_estimator().yaw();
         eprintln!(
             "t {:6.1} yaw {:7.1} ref {:7.1} sig {:5.1} src {:?} mag fused {} rej {} dist {} tr {:.2} gsf {:?} resets {} vel tr {:.2} speed {:.1}",

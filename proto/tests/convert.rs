@@ -219,6 +219,9 @@ fn unknown_and_unspecified_enums() {
     };
     c.profile = 7;
     assert_eq!(field_of(VehicleConfig::try_from(&c)).0, "profile");
+    c.profile = 0;
+    c.airframe = 9;
+    assert_eq!(field_of(VehicleConfig::try_from(&c)).0, "airframe");
 }
 
 #[test]

@@ -165,7 +165,12 @@ mod tests {
         let c = r.counters.unwrap();
         assert_eq!(c.accepted, 275);
         assert_eq!(
-            (c.imu_accepted, c.gnss_accepted, c.mag_accepted, c.baro_accepted),
+            (
+                c.imu_accepted,
+                c.gnss_accepted,
+                c.mag_accepted,
+                c.baro_accepted
+            ),
             (200, 5, 50, 20)
         );
     }

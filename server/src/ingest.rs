@@ -468,9 +468,7 @@ fn gate_rejection(r: Option<GateRefusal>) -> Rejection {
     use crate::metrics::Cause;
     let (status, cause, reason) = match r {
         Some(GateRefusal::Late(reason)) => (pb::IngestStatus::Late, Cause::Late, reason),
-        Some(GateRefusal::Duplicate(reason)) => {
-            (pb::IngestStatus::Late, Cause::Duplicate, reason)
-        }
+        Some(GateRefusal::Duplicate(reason)) => (pb::IngestStatus::Late, Cause::Duplicate, reason),
         // A sensor whose clock runs backwards is sending bad data, not late data.
         Some(GateRefusal::Backwards(reason)) => {
             (pb::IngestStatus::InvalidArgument, Cause::Backwards, reason)

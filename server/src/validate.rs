@@ -57,7 +57,11 @@ impl Rejection {
 
     /// RESOURCE_EXHAUSTED.
     pub fn exhausted(reason: impl Into<String>) -> Self {
-        Self::new(pb::IngestStatus::ResourceExhausted, Cause::Exhausted, reason)
+        Self::new(
+            pb::IngestStatus::ResourceExhausted,
+            Cause::Exhausted,
+            reason,
+        )
     }
 
     /// The matching gRPC status (for unary calls).
@@ -373,13 +377,15 @@ mod tests {
             (e.cause, e.status),
             (Cause::OutOfRange, pb::IngestStatus::InvalidArgument)
         );
-        assert!(mag_sample(&pb::MagSample {
-            t_ns: 1,
-            field_x_t: 2.2e-5,
-            field_z_t: 4.1e-5,
-            ..Default::default()
-        })
-        .is_ok());
+        assert!(
+            mag_sample(&pb::MagSample {
+                t_ns: 1,
+                field_x_t: 2.2e-5,
+                field_z_t: 4.1e-5,
+                ..Default::default()
+            })
+            .is_ok()
+        );
         // 1013 hPa sent as Pa.
         let e = baro_sample(&pb::BaroSample {
             t_ns: 1,
@@ -395,12 +401,14 @@ mod tests {
         })
         .unwrap_err();
         assert!(e.reason.starts_with("baro.t_ns"), "{}", e.reason);
-        assert!(baro_sample(&pb::BaroSample {
-            t_ns: 5,
-            pressure_pa: 101_325.0,
-            temperature_degc: Some(20.0),
-        })
-        .is_ok());
+        assert!(
+            baro_sample(&pb::BaroSample {
+                t_ns: 5,
+                pressure_pa: 101_325.0,
+                temperature_degc: Some(20.0),
+            })
+            .is_ok()
+        );
     }
 
     #[test]

@@ -361,10 +361,14 @@ mod tests {
             Err(GateRefusal::Backwards(_))
         ));
         assert!(
-            g.admit(InputKind::Imu, 990, 0, w, f, || "imu".into()).is_ok(),
+            g.admit(InputKind::Imu, 990, 0, w, f, || "imu".into())
+                .is_ok(),
             "IMU may be reordered within the window"
         );
-        assert!(g.admit(InputKind::Mag, 1_010, 0, w, f, || "mag".into()).is_ok());
+        assert!(
+            g.admit(InputKind::Mag, 1_010, 0, w, f, || "mag".into())
+                .is_ok()
+        );
     }
 
     #[test]

@@ -268,7 +268,8 @@ impl PaperFilter {
         };
         let a_n = match self.last_fix {
             Some((p, _)) if meas.t_ns > p.t_ns && meas.t_ns - p.t_ns < 2_000_000_000 => {
-                (meas_vel - p.vel_ned_mps.unwrap_or(meas_vel)) / ((meas.t_ns - p.t_ns) as f64 * 1e-9)
+                (meas_vel - p.vel_ned_mps.unwrap_or(meas_vel))
+                    / ((meas.t_ns - p.t_ns) as f64 * 1e-9)
             }
             _ => Vector3::zeros(),
         };

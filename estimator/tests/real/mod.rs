@@ -287,7 +287,9 @@ pub fn score(f: &RealFlight, poses: &[PoseOutput], start_ns: i64, end_ns: i64) -
         while j + 1 < f.reference.len() && f.reference[j + 1].t_ns <= p.t_ns {
             j += 1;
         }
-        let Some(r) = f.reference.get(j) else { continue };
+        let Some(r) = f.reference.get(j) else {
+            continue;
+        };
         if (r.t_ns - p.t_ns).abs() > 200_000_000 {
             continue;
         }
@@ -317,7 +319,11 @@ pub fn score(f: &RealFlight, poses: &[PoseOutput], start_ns: i64, end_ns: i64) -
         let frame = LocalFrame::new(Lla::from_deg(first.lat_deg, first.lon_deg, first.alt_m));
         let (mut sum, mut m) = (0.0, 0usize);
         let mut k = 0usize;
-        for g in f.gnss.iter().filter(|g| g.t_ns >= start_ns && g.t_ns <= end_ns) {
+        for g in f
+            .gnss
+            .iter()
+            .filter(|g| g.t_ns >= start_ns && g.t_ns <= end_ns)
+        {
             while k + 1 < poses.len() && poses[k + 1].t_ns <= g.t_ns {
                 k += 1;
             }
@@ -343,7 +349,10 @@ pub fn score(f: &RealFlight, poses: &[PoseOutput], start_ns: i64, end_ns: i64) -
     }
     // The longest stretch without a fused GNSS position while fixes kept coming.
     let mut last_fused: Option<(i64, u64)> = None;
-    for p in poses.iter().filter(|p| p.t_ns >= start_ns && p.t_ns <= end_ns) {
+    for p in poses
+        .iter()
+        .filter(|p| p.t_ns >= start_ns && p.t_ns <= end_ns)
+    {
         let fused = p.health.gnss_pos.fused;
         match last_fused {
             Some((t, n)) if n == fused => {

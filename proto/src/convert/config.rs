@@ -1,8 +1,8 @@
 //! Vehicle configuration: IMU noise, GNSS lever arm, camera model and mount, profile.
 
 use uavnav_core::{
-    Airframe,    BaroConfig, CameraConfig, CameraModel, Distortion, FilterProfile, GnssConfig, ImuConfig,
-    MagConfig, VehicleConfig,
+    Airframe, BaroConfig, CameraConfig, CameraModel, Distortion, FilterProfile, GnssConfig,
+    ImuConfig, MagConfig, VehicleConfig,
 };
 
 use super::geometry::{isometry, required_quaternion, required_vector3};

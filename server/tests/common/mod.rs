@@ -256,6 +256,8 @@ pub fn vehicle_config(camera: bool) -> pb::VehicleConfig {
         profile: pb::FilterProfile::Eskf as i32,
         mag: None,
         baro: None,
+        // the service tests feed the simulator's fixed-wing flights
+        airframe: pb::Airframe::FixedWing as i32,
     }
 }
 
