@@ -139,10 +139,7 @@ impl AslWriter {
         let mag = match &config.mag {
             Some(m) => {
                 let csv = Csv::create(&mav.join(MAG), MAG_HEADER)?;
-                write_file(
-                    &mav.join(MAG).join(SENSOR_YAML),
-                    &sensor_yaml::write_mag(m),
-                )?;
+                write_file(&mav.join(MAG).join(SENSOR_YAML), &sensor_yaml::write_mag(m))?;
                 Some(csv)
             }
             None => None,
@@ -253,10 +250,13 @@ impl AslWriter {
 
     /// Appends a barometer sample (an unknown temperature is an empty cell).
     pub fn write_baro(&mut self, b: &BaroSample) -> Result<()> {
-        let csv = self.baro.as_mut().ok_or_else(|| DatasetError::Unsupported {
-            path: self.mav.join(BARO),
-            message: "barometer sample for a vehicle configured without one".into(),
-        })?;
+        let csv = self
+            .baro
+            .as_mut()
+            .ok_or_else(|| DatasetError::Unsupported {
+                path: self.mav.join(BARO),
+                message: "barometer sample for a vehicle configured without one".into(),
+            })?;
         csv.opt_row(b.t_ns, [Some(b.pressure_pa), b.temperature_degc])
     }
 

@@ -183,9 +183,13 @@ impl McapWriter {
                 }
                 Ok(())
             }
-            SensorEvent::Mag(m) => {
-                self.write_message(vehicle, Stream::Mag, &v1::MagSample::from(m), t, log_time_ns)
-            }
+            SensorEvent::Mag(m) => self.write_message(
+                vehicle,
+                Stream::Mag,
+                &v1::MagSample::from(m),
+                t,
+                log_time_ns,
+            ),
             SensorEvent::Baro(b) => {
                 let wire = v1::BaroSample::from(b);
                 self.write_message(vehicle, Stream::Baro, &wire, t, log_time_ns)
