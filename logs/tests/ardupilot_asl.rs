@@ -6,8 +6,9 @@
 //! `%.6e`, BARO `%.3f`/`%.2f`), and the time offset of `conversion.json`.
 //!
 //! Differences, on purpose:
-//! * GNSS stamps: the ASL rows are stamped `T − EKF_POS_DELAY`; ours are stamped as logged with
-//!   the delay in `gnss_delay_s`, so `t_ns − delay` is compared.
+//! * GNSS stamps: the ASL rows are stamped `T − EKF_POS_DELAY` (T − 220 ms in all three logs);
+//!   the importer stamps fixes as logged (`T`) and reports `gnss_delay_s` = 0.22 (also in
+//!   `config.gnss.delay_ns`, which the estimator subtracts), so `t_ns − delay` is compared.
 //! * GNSS altitude: the ASL adds one `N`, at the EKF origin, to every fix; we add `N` at each fix
 //!   (the geoid moves ~3 cm/km here, the flights span a few hundred metres), so altitudes are
 //!   compared to 5 mm instead of the print precision, and `N` at the origin to 0.1 mm.
@@ -20,17 +21,21 @@
 //! * plane_E ends inside a message (the logger stopped mid-write), so it is imported with
 //!   `stop_at_damage` and a note says where it stopped.
 
-use std::path::PathBuf;
-
 use uavnav_logs::{FlightLog, ImportOptions, LogKind, TimeBase, VehicleKind};
 
-/// `shared/data/real_flights` next to the workspace (`CARGO_MANIFEST_DIR/../../shared` in a
-/// checkout beside `shared/`; the nearest ancestor holding `shared/data` in a nested worktree).
-fn shared() -> Option<PathBuf> {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .ancestors()
-        .map(|a| a.join("shared/data/real_flights"))
-        .find(|p| p.is_dir())
+/// `../shared/data` beside the workspace (this crate is `<workspace>/logs`), when present: a
+/// user's clone has no `../shared`, and the test then skips.
+fn shared_data() -> Option<std::path::PathBuf> {
+    let p = std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"));
+    if p.is_dir() {
+        Some(p)
+    } else {
+        eprintln!(
+            "skipping: {} not found (the shared real-flight and public logs live there)",
+            p.display()
+        );
+        None
+    }
 }
 
 /// Rows of a CSV file as numbers (empty cells NaN); the header line is skipped.
@@ -317,8 +322,7 @@ fn check_flight(root: &std::path::Path, name: &str) {
 
 #[test]
 fn ardupilot_logs_match_shared_asl_conversions() {
-    let Some(root) = shared() else {
-        eprintln!("skipping: ../shared/data not found");
+    let Some(root) = shared_data().map(|d| d.join("real_flights")) else {
         return;
     };
     for name in ["erle_copter_218", "erle_copter_103", "erle_plane_E"] {
