@@ -83,6 +83,17 @@ pub enum DatasetError {
         #[source]
         source: uavnav_proto::ConvertError,
     },
+    /// A flight log (`.BIN`, `.ulg`) that could not be imported; the reason names the byte offset
+    /// where the log stopped making sense.
+    // Not a `#[source]`: the text already carries the reason, and a source would repeat it in
+    // error chains.
+    #[error("{}: {error}", path.display())]
+    Log {
+        /// The log file.
+        path: PathBuf,
+        /// The importer's error.
+        error: uavnav_logs::LogError,
+    },
     /// A dataset path that is neither an ASL folder nor an `.mcap` file, or a wrong request.
     #[error("{}: {message}", path.display())]
     Unsupported {

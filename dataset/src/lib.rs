@@ -1,15 +1,21 @@
 //! # uavnav-dataset
 //!
 //! Streaming dataset I/O for uavnav: EuRoC/ASL folders (extended with `gnss0`) and MCAP
-//! recordings, read and written, and converters between them. A flight's camera frames are never
+//! recordings, read and written, and converters between them; autopilot flight logs (ArduPilot
+//! DataFlash `.BIN`, PX4 ULog `.ulg`) are read as datasets too. A flight's camera frames are never
 //! all in memory: events are read lazily and merged in time order; truth is read fully (small).
+//!
+//! Truth and reference are kept apart: [`Dataset::truth`] is ground truth (a simulator's, a
+//! motion-capture system's); [`Dataset::reference`] is another estimator's output, such as the
+//! autopilot's own EKF in a flight log, which can be compared against but is not truth.
 //!
 //! | module / item | what it holds |
 //! |---|---|
-//! | [`Dataset`] | opens an ASL folder or an `.mcap` file by path: config, origin, truth, [`EventStream`] |
+//! | [`Dataset`] | opens an ASL folder, an `.mcap` file or a flight log by path: config, origin, truth or [`Reference`], [`EventStream`] |
 //! | [`asl`] | the ASL layout ([`asl::layout`]), its reader ([`asl::AslDataset`]) and [`AslWriter`] |
 //! | [`mcap_io`] | topics and times ([`mcap_io`] doc), [`McapWriter`], [`mcap_io::reader::McapDataset`], fleet [`mcap_io::reader::McapEvents`] |
 //! | [`convert`] | [`convert::convert`] (by extension), [`convert::asl_to_mcap`], [`convert::mcap_to_asl`] |
+//! | [`flight_log`] | a `uavnav_logs::FlightLog` as a dataset ([`flight_log::LogDataset`]) |
 //! | [`error`] | [`DatasetError`]: every error names the file, and the line where there is one |
 //! | [`yaml`], [`csv`], [`merge`] | the `sensor.yaml` subset parser, the streaming `data.csv` reader, the k-way time merge |
 //!
@@ -27,6 +33,7 @@ pub mod asl;
 pub mod convert;
 pub mod csv;
 pub mod error;
+pub mod flight_log;
 pub mod mcap_io;
 pub mod merge;
 pub mod yaml;
@@ -48,14 +55,38 @@ pub enum Format {
     Asl,
     /// An MCAP recording.
     Mcap,
+    /// An autopilot flight log (ArduPilot DataFlash `.BIN`, PX4 ULog `.ulg`), read only.
+    Log,
 }
 
 impl Format {
-    /// `.mcap` (any case) is MCAP, anything else an ASL folder.
+    /// `.mcap` (any case) is MCAP, `.bin` and `.ulg` (any case) a flight log, anything else an
+    /// ASL folder ([`Dataset::open_with`] also recognises a flight log by its content).
     pub fn of_path(path: &Path) -> Format {
         match path.extension().and_then(|e| e.to_str()) {
             Some(ext) if ext.eq_ignore_ascii_case("mcap") => Format::Mcap,
+            _ if flight_log::has_log_extension(path) => Format::Log,
             _ => Format::Asl,
+        }
+    }
+}
+
+/// Another estimator's output recorded with the data (an autopilot's own EKF): something to
+/// compare against, not ground truth. In the frame of [`Dataset::origin`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reference {
+    /// What produced it (`"EKF1"`, a PX4 topic), when known.
+    pub source: Option<String>,
+    /// The samples, in time order (EuRoC ground-truth fields; biases 0 when not logged).
+    pub samples: Vec<TruthSample>,
+}
+
+impl Reference {
+    /// How reports name it: `reference (autopilot estimate, EKF1)`.
+    pub fn label(&self) -> String {
+        match &self.source {
+            Some(s) => format!("reference (autopilot estimate, {s})"),
+            None => "reference (autopilot estimate)".to_owned(),
         }
     }
 }
@@ -67,20 +98,33 @@ pub struct ReadOptions {
     pub vehicle: Option<String>,
     /// What to do with ASL camera rows whose image file is missing.
     pub missing_images: MissingImages,
+    /// GNSS delay, s, replacing the dataset's (`GnssConfig::delay_ns`; for a flight log, the
+    /// autopilot's parameter).
+    pub gnss_delay_s: Option<f64>,
+    /// Flight logs: import what comes before the first damaged byte (a log cut by a power loss)
+    /// instead of failing; the import's notes say where it stopped.
+    pub stop_at_damage: bool,
 }
 
 #[derive(Debug, Clone)]
 enum Inner {
     Asl(AslDataset),
     Mcap(mcap_io::reader::McapDataset),
+    Log(flight_log::LogDataset),
 }
 
-/// One vehicle's dataset, ASL folder or MCAP recording.
+/// One vehicle's dataset: ASL folder, MCAP recording or flight log.
 #[derive(Debug, Clone)]
 pub struct Dataset {
     path: PathBuf,
     inner: Inner,
+    /// The configuration with [`ReadOptions::gnss_delay_s`] applied.
+    config: VehicleConfig,
 }
+
+/// Longest GNSS delay accepted from [`ReadOptions::gnss_delay_s`], s (the `gnss0/sensor.yaml`
+/// bound).
+pub use asl::sensor_yaml::MAX_GNSS_DELAY_S;
 
 impl Dataset {
     /// Opens `path` with default options.
@@ -88,27 +132,66 @@ impl Dataset {
         Self::open_with(path, &ReadOptions::default())
     }
 
-    /// Opens `path`: an `.mcap` file, or an ASL folder (the `mav0` folder or its parent).
+    /// Opens `path`: an `.mcap` file, a flight log (`.BIN`, `.ulg`, or any file whose first bytes
+    /// are a DataFlash message or the ULog magic), or an ASL folder (the `mav0` folder or its
+    /// parent).
     pub fn open_with(path: impl AsRef<Path>, options: &ReadOptions) -> Result<Self> {
         let path = path.as_ref();
+        if let Some(d) = options.gnss_delay_s
+            && !(0.0..=MAX_GNSS_DELAY_S).contains(&d)
+        {
+            return Err(DatasetError::Unsupported {
+                path: path.to_owned(),
+                message: format!("GNSS delay {d} s is outside 0..={MAX_GNSS_DELAY_S} s"),
+            });
+        }
         let inner = match Format::of_path(path) {
             Format::Mcap => Inner::Mcap(mcap_io::reader::McapDataset::open(
                 path,
                 options.vehicle.as_deref(),
             )?),
+            Format::Log => Inner::Log(flight_log::LogDataset::open(path, options)?),
+            Format::Asl if path.is_file() => {
+                // A log under another name (`log.1`, `00000042`): recognised by its first bytes.
+                let data = std::fs::read(path).map_err(|e| DatasetError::io(path, e))?;
+                match flight_log::LogDataset::from_bytes(path, &data, options) {
+                    Ok(log) => Inner::Log(log),
+                    Err(DatasetError::Log {
+                        error: uavnav_logs::LogError::UnknownFormat,
+                        ..
+                    }) => {
+                        return Err(DatasetError::Unsupported {
+                            path: path.to_owned(),
+                            message: "not a folder (ASL), an .mcap file nor a flight log \
+                                      (ArduPilot .BIN, PX4 .ulg)"
+                                .into(),
+                        });
+                    }
+                    Err(e) => return Err(e),
+                }
+            }
             Format::Asl => {
                 if !path.is_dir() {
                     return Err(DatasetError::Unsupported {
                         path: path.to_owned(),
-                        message: "not a folder (ASL) nor an .mcap file".into(),
+                        message: "not a folder (ASL), an .mcap file nor a flight log".into(),
                     });
                 }
                 Inner::Asl(AslDataset::open(path, options.missing_images)?)
             }
         };
+        let mut config = match &inner {
+            Inner::Asl(d) => d.config().clone(),
+            Inner::Mcap(d) => d.config().clone(),
+            Inner::Log(d) => d.config().clone(),
+        };
+        if let (Some(d), Some(g)) = (options.gnss_delay_s, config.gnss.as_mut()) {
+            g.delay_ns = uavnav_core::s_to_ns(d);
+        }
         Ok(Dataset {
             path: path.to_owned(),
             inner,
+            config,
         })
     }
 
@@ -122,6 +205,7 @@ impl Dataset {
         match self.inner {
             Inner::Asl(_) => Format::Asl,
             Inner::Mcap(_) => Format::Mcap,
+            Inner::Log(_) => Format::Log,
         }
     }
 
@@ -130,30 +214,49 @@ impl Dataset {
         match &self.inner {
             Inner::Asl(d) => d.vehicle_id(),
             Inner::Mcap(d) => d.vehicle_id(),
+            Inner::Log(d) => d.vehicle_id(),
         }
     }
 
-    /// The vehicle configuration.
+    /// The vehicle configuration (with [`ReadOptions::gnss_delay_s`] applied).
     pub fn config(&self) -> &VehicleConfig {
-        match &self.inner {
-            Inner::Asl(d) => d.config(),
-            Inner::Mcap(d) => d.config(),
-        }
+        &self.config
     }
 
-    /// The origin of the truth's local NED frame.
+    /// The origin of the local NED frame of the truth, or of the reference when there is no truth.
     pub fn origin(&self) -> Option<Lla> {
         match &self.inner {
             Inner::Asl(d) => d.origin(),
             Inner::Mcap(d) => d.origin(),
+            Inner::Log(d) => d.origin(),
         }
     }
 
-    /// The ground truth, if any.
+    /// The ground truth, if any (never an autopilot's estimate: see [`Self::reference`]).
     pub fn truth(&self) -> Option<&[TruthSample]> {
         match &self.inner {
             Inner::Asl(d) => d.truth(),
             Inner::Mcap(d) => d.truth(),
+            Inner::Log(_) => None,
+        }
+    }
+
+    /// Another estimator's output recorded with the data (a flight log's autopilot EKF; an ASL
+    /// folder whose `state_groundtruth_estimate0` says it is not ground truth; an MCAP
+    /// `reference` topic), if any.
+    pub fn reference(&self) -> Option<&Reference> {
+        match &self.inner {
+            Inner::Asl(d) => d.reference(),
+            Inner::Mcap(d) => d.reference(),
+            Inner::Log(d) => d.reference(),
+        }
+    }
+
+    /// What the reader dropped or assumed (a flight log's import notes); empty otherwise.
+    pub fn notes(&self) -> &[String] {
+        match &self.inner {
+            Inner::Log(d) => d.notes(),
+            _ => &[],
         }
     }
 
@@ -163,12 +266,16 @@ impl Dataset {
             Inner::Asl(d) => {
                 let skipped = Arc::new(AtomicUsize::new(0));
                 EventStream {
-                    inner: Events::Asl(merge::Merge::new(d.sources(skipped.clone())?)),
+                    inner: Events::Merge(merge::Merge::new(d.sources(skipped.clone())?)),
                     skipped,
                 }
             }
             Inner::Mcap(d) => EventStream {
                 inner: Events::Mcap(Box::new(d.events()?)),
+                skipped: Arc::default(),
+            },
+            Inner::Log(d) => EventStream {
+                inner: Events::Merge(d.merge()),
                 skipped: Arc::default(),
             },
         })
@@ -177,7 +284,7 @@ impl Dataset {
 
 #[derive(Debug)]
 enum Events {
-    Asl(merge::Merge),
+    Merge(merge::Merge),
     Mcap(Box<mcap_io::reader::McapEvents>),
 }
 
@@ -200,7 +307,7 @@ impl Iterator for EventStream {
 
     fn next(&mut self) -> Option<Self::Item> {
         match &mut self.inner {
-            Events::Asl(m) => m.next(),
+            Events::Merge(m) => m.next(),
             Events::Mcap(m) => m.next().map(|r| r.map(|ve| ve.event)),
         }
     }

@@ -41,7 +41,7 @@ fn asl_to_mcap_to_asl_is_byte_identical() {
     let s2 = mcap_to_asl(&m, &b, None).unwrap();
     assert_eq!(s1, s2);
     assert_eq!(
-        (s1.imu + s1.gnss + s1.frames, s1.truth),
+        (s1.imu + s1.gnss + s1.mag + s1.baro + s1.frames, s1.truth),
         (events.len(), truth.len())
     );
     for csv in CSVS {

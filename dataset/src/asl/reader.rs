@@ -34,6 +34,7 @@ pub struct AslDataset {
     config: VehicleConfig,
     origin: Option<Lla>,
     truth: Option<Vec<TruthSample>>,
+    reference: Option<crate::Reference>,
     missing_images: MissingImages,
 }
 
@@ -72,10 +73,18 @@ impl AslDataset {
         let truth_dir = mav.join(TRUTH);
         let origin = sensor_yaml::read_origin(&truth_dir.join(SENSOR_YAML))?;
         let truth_csv = truth_dir.join(DATA_CSV);
-        let truth = truth_csv
+        let mut truth = truth_csv
             .exists()
             .then(|| read_truth(&truth_csv))
             .transpose()?;
+        // EuRoC has one slot for a reference trajectory; a converted flight log fills it with the
+        // autopilot's estimate and says so in its sensor.yaml: that is a reference, not truth.
+        let reference = match sensor_yaml::read_reference_marker(&truth_dir.join(SENSOR_YAML))? {
+            Some(source) => truth
+                .take()
+                .map(|samples| crate::Reference { source, samples }),
+            None => None,
+        };
         Ok(AslDataset {
             mav,
             vehicle_id: body
@@ -93,6 +102,7 @@ impl AslDataset {
             },
             origin,
             truth,
+            reference,
             missing_images,
         })
     }
@@ -120,6 +130,11 @@ impl AslDataset {
     /// The ground truth, if the folder has it.
     pub fn truth(&self) -> Option<&[TruthSample]> {
         self.truth.as_deref()
+    }
+
+    /// The reference (`state_groundtruth_estimate0` marked as not ground truth), if any.
+    pub fn reference(&self) -> Option<&crate::Reference> {
+        self.reference.as_ref()
     }
 
     /// The event sources (IMU, GNSS, magnetometer, barometer, camera), each streaming its

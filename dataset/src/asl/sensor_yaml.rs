@@ -358,6 +358,48 @@ pub fn write_truth(origin: Option<&Lla>) -> String {
     s
 }
 
+/// The prefix of the `comment` that marks `state_groundtruth_estimate0` as a reference (another
+/// estimator's output) rather than ground truth; the shared real-flight conversions use it.
+pub const NOT_TRUTH_PREFIX: &str = "NOT ground truth";
+
+/// Whether `state_groundtruth_estimate0/sensor.yaml` marks its samples as a reference: `Some`
+/// with the `reference` key's value (what produced it) when the `comment` starts with
+/// [`NOT_TRUTH_PREFIX`] or a `reference` key is present; `None` for ground truth or no file.
+pub fn read_reference_marker(path: &Path) -> Result<Option<Option<String>>> {
+    if !path.exists() {
+        return Ok(None);
+    }
+    let y = Yaml::read(path)?;
+    let source = y.get("reference").map(|_| y.str("reference")).transpose()?;
+    let marked = y
+        .get("comment")
+        .map(|_| y.str("comment"))
+        .transpose()?
+        .is_some_and(|c| {
+            c.get(..NOT_TRUTH_PREFIX.len())
+                .is_some_and(|p| p.eq_ignore_ascii_case(NOT_TRUTH_PREFIX))
+        });
+    Ok((marked || source.is_some()).then(|| source.map(str::to_owned)))
+}
+
+/// `state_groundtruth_estimate0/sensor.yaml` text for a reference: the same layout as for truth,
+/// with the shared conversions' "NOT ground truth" comment and the `reference` key.
+pub fn write_reference(origin: Option<&Lla>, source: Option<&str>) -> String {
+    let truth = write_truth(origin);
+    let what = source.unwrap_or("estimate");
+    let mut s = truth.replacen(
+        "comment: ground truth written by uavnav\n",
+        &format!(
+            "comment: {NOT_TRUTH_PREFIX}: the autopilot's own {what}, written by uavnav from a flight log\n"
+        ),
+        1,
+    );
+    if let Some(src) = source {
+        s.push_str(&format!("reference: {src}\n"));
+    }
+    s
+}
+
 /// The uavnav extras of `body.yaml`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BodyExtras {

@@ -290,14 +290,31 @@ impl AslWriter {
     /// Appends a truth sample (creates the truth folder on first use).
     pub fn write_truth(&mut self, s: &TruthSample) -> Result<()> {
         if self.truth.is_none() {
-            let dir = self.mav.join(TRUTH);
-            let csv = Csv::create(&dir, TRUTH_HEADER)?;
-            write_file(
-                &dir.join(SENSOR_YAML),
-                &sensor_yaml::write_truth(self.origin.as_ref()),
-            )?;
-            self.truth = Some(csv);
+            self.start_truth(&sensor_yaml::write_truth(self.origin.as_ref()))?;
         }
+        self.truth_row(s)
+    }
+
+    /// Appends a reference sample (another estimator's output, e.g. an autopilot's EKF) to
+    /// `state_groundtruth_estimate0`, whose `sensor.yaml` then says it is not ground truth (the
+    /// layout of the shared real-flight conversions). A folder holds truth or a reference, not
+    /// both: do not mix with [`Self::write_truth`].
+    pub fn write_reference(&mut self, s: &TruthSample, source: Option<&str>) -> Result<()> {
+        if self.truth.is_none() {
+            self.start_truth(&sensor_yaml::write_reference(self.origin.as_ref(), source))?;
+        }
+        self.truth_row(s)
+    }
+
+    fn start_truth(&mut self, yaml: &str) -> Result<()> {
+        let dir = self.mav.join(TRUTH);
+        let csv = Csv::create(&dir, TRUTH_HEADER)?;
+        write_file(&dir.join(SENSOR_YAML), yaml)?;
+        self.truth = Some(csv);
+        Ok(())
+    }
+
+    fn truth_row(&mut self, s: &TruthSample) -> Result<()> {
         let Some(csv) = self.truth.as_mut() else {
             return Ok(());
         };

@@ -13,6 +13,7 @@
 //! | `/uavnav/{vehicle}/config` | `uavnav.v1.VehicleConfig` | the vehicle configuration |
 //! | `/uavnav/{vehicle}/info` | `uavnav.v1.DatasetInfo` | the truth's NED origin |
 //! | `/uavnav/{vehicle}/truth` | `uavnav.v1.TruthSample` | ground truth |
+//! | `/uavnav/{vehicle}/reference` | `uavnav.v1.TruthSample` | another estimator's output, not truth (a flight log's autopilot EKF); channel metadata `reference` names it |
 //! | `/uavnav/{vehicle}/pose` | `uavnav.v1.PoseEstimate` | estimator output |
 //! | `/uavnav/{vehicle}/pose/frame` | `foxglove.PoseInFrame` | the same poses for Foxglove's 3-D panel |
 //! | `/uavnav/{vehicle}/health` | `uavnav.v1.VehicleHealth` | health reports |
@@ -60,6 +61,8 @@ pub enum Stream {
     Info,
     /// `truth`
     Truth,
+    /// `reference` (not truth)
+    Reference,
     /// `pose`
     Pose,
     /// `pose/frame` (display)
@@ -69,7 +72,7 @@ pub enum Stream {
 }
 
 /// Every stream, for lookups.
-const STREAMS: [Stream; 12] = [
+const STREAMS: [Stream; 13] = [
     Stream::Imu,
     Stream::Gnss,
     Stream::GnssLocation,
@@ -79,6 +82,7 @@ const STREAMS: [Stream; 12] = [
     Stream::Config,
     Stream::Info,
     Stream::Truth,
+    Stream::Reference,
     Stream::Pose,
     Stream::PoseFrame,
     Stream::Health,
@@ -86,6 +90,9 @@ const STREAMS: [Stream; 12] = [
 
 /// The topic prefix.
 pub const TOPIC_PREFIX: &str = "/uavnav/";
+
+/// The channel metadata key naming what produced a `reference` stream (`EKF1`, ...).
+pub const REFERENCE_METADATA_KEY: &str = "reference";
 
 impl Stream {
     /// The topic suffix after `/uavnav/{vehicle}/`.
@@ -100,6 +107,7 @@ impl Stream {
             Stream::Config => "config",
             Stream::Info => "info",
             Stream::Truth => "truth",
+            Stream::Reference => "reference",
             Stream::Pose => "pose",
             Stream::PoseFrame => "pose/frame",
             Stream::Health => "health",
@@ -117,7 +125,7 @@ impl Stream {
             Stream::Camera => names::FOXGLOVE_COMPRESSED_IMAGE,
             Stream::Config => names::VEHICLE_CONFIG,
             Stream::Info => names::DATASET_INFO,
-            Stream::Truth => names::TRUTH_SAMPLE,
+            Stream::Truth | Stream::Reference => names::TRUTH_SAMPLE,
             Stream::Pose => names::POSE_ESTIMATE,
             Stream::PoseFrame => names::FOXGLOVE_POSE_IN_FRAME,
             Stream::Health => names::VEHICLE_HEALTH,

@@ -45,6 +45,7 @@ pub struct McapDataset {
     has_config: bool,
     origin: Option<Lla>,
     truth: Option<Vec<TruthSample>>,
+    reference: Option<crate::Reference>,
 }
 
 /// Where a message sits, for error messages.
@@ -115,6 +116,7 @@ impl McapDataset {
             has_config: false,
             origin: None,
             truth: None,
+            reference: None,
         };
         ds.read_fixed()?;
         Ok(ds)
@@ -124,6 +126,8 @@ impl McapDataset {
     fn read_fixed(&mut self) -> Result<()> {
         let path = self.path.clone();
         let mut truth = Vec::new();
+        let mut reference = Vec::new();
+        let mut reference_source = None;
         let mut seen_info = false;
         for msg in open_messages(&path)? {
             let msg = msg.map_err(|e| DatasetError::mcap(&path, e))?;
@@ -154,11 +158,28 @@ impl McapDataset {
                     let wire: v1::TruthSample = decode(&path, &msg)?;
                     truth.push(TruthSample::try_from(&wire).map_err(|e| invalid(&path, &msg, e))?);
                 }
+                Stream::Reference => {
+                    let wire: v1::TruthSample = decode(&path, &msg)?;
+                    reference
+                        .push(TruthSample::try_from(&wire).map_err(|e| invalid(&path, &msg, e))?);
+                    if reference_source.is_none() {
+                        reference_source = msg
+                            .channel
+                            .metadata
+                            .get(super::REFERENCE_METADATA_KEY)
+                            .cloned();
+                    }
+                }
                 _ => {}
             }
         }
         truth.sort_by_key(|s| s.t_ns);
         self.truth = (!truth.is_empty()).then_some(truth);
+        reference.sort_by_key(|s| s.t_ns);
+        self.reference = (!reference.is_empty()).then(|| crate::Reference {
+            source: reference_source,
+            samples: reference,
+        });
         Ok(())
     }
 
@@ -191,6 +212,11 @@ impl McapDataset {
     /// The truth, if recorded.
     pub fn truth(&self) -> Option<&[TruthSample]> {
         self.truth.as_deref()
+    }
+
+    /// The reference (`/uavnav/{vehicle}/reference`), if recorded.
+    pub fn reference(&self) -> Option<&crate::Reference> {
+        self.reference.as_ref()
     }
 
     /// A fresh, lazy, time-ordered stream of the vehicle's sensor events.

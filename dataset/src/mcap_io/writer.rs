@@ -9,7 +9,7 @@ use prost::Message;
 use uavnav_core::{Lla, LocalFrame, SensorEvent, TruthSample, VehicleConfig};
 use uavnav_proto::{foxglove_conv, v1};
 
-use super::{Stream, schema_data, topic};
+use super::{REFERENCE_METADATA_KEY, Stream, schema_data, topic};
 use crate::error::{DatasetError, Result};
 
 /// Chunk compression.
@@ -101,6 +101,16 @@ impl McapWriter {
 
     /// The channel of `vehicle`'s `stream`, created on first use.
     fn channel(&mut self, vehicle: &str, stream: Stream) -> Result<(u16, u32)> {
+        self.channel_with(vehicle, stream, None)
+    }
+
+    /// [`Self::channel`], with one more metadata entry when the channel is created.
+    fn channel_with(
+        &mut self,
+        vehicle: &str,
+        stream: Stream,
+        extra: Option<(&str, &str)>,
+    ) -> Result<(u16, u32)> {
         let topic = topic(vehicle, stream);
         if let Some((id, seq)) = self.channels.get_mut(&topic) {
             *seq += 1;
@@ -126,7 +136,10 @@ impl McapWriter {
                 id
             }
         };
-        let metadata = BTreeMap::from([("vehicle_id".to_owned(), vehicle.to_owned())]);
+        let mut metadata = BTreeMap::from([("vehicle_id".to_owned(), vehicle.to_owned())]);
+        if let Some((k, v)) = extra {
+            metadata.insert(k.to_owned(), v.to_owned());
+        }
         let id = self
             .out
             .add_channel(schema_id, &topic, "protobuf", &metadata)
@@ -228,6 +241,34 @@ impl McapWriter {
             origin: origin.map(Into::into),
         };
         self.write_message(vehicle, Stream::Info, &info, t_ns, t_ns)
+    }
+
+    /// Writes a reference sample (another estimator's output, not truth; publish time = its
+    /// `t_ns`). `source` (what produced it) goes into the channel metadata as `reference` when
+    /// the channel is created.
+    pub fn write_reference(
+        &mut self,
+        vehicle: &str,
+        s: &TruthSample,
+        source: Option<&str>,
+        log_time_ns: i64,
+    ) -> Result<()> {
+        let header = mcap::records::MessageHeader {
+            channel_id: 0,
+            sequence: 0,
+            log_time: mcap_time(&self.path, log_time_ns)?,
+            publish_time: mcap_time(&self.path, s.t_ns)?,
+        };
+        let extra = source.map(|src| (REFERENCE_METADATA_KEY, src));
+        let (channel_id, sequence) = self.channel_with(vehicle, Stream::Reference, extra)?;
+        let header = mcap::records::MessageHeader {
+            channel_id,
+            sequence,
+            ..header
+        };
+        self.out
+            .write_to_known_channel(&header, &v1::TruthSample::from(s).encode_to_vec())
+            .map_err(|e| DatasetError::mcap(&self.path, e))
     }
 
     /// Writes a truth sample (publish time = its `t_ns`).
