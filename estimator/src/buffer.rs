@@ -17,6 +17,8 @@ pub enum Event {
     CloneAt(i64),
     /// A magnetometer sample, field already in the body frame.
     Mag(i64, nalgebra::Vector3<f64>),
+    /// A barometer sample: static pressure, Pa.
+    Baro(i64, f64),
 }
 
 impl Event {
@@ -26,7 +28,7 @@ impl Event {
             Event::Gnss(g) => g.t_ns,
             Event::Ego(e) => e.t1_ns,
             Event::CloneAt(t) => *t,
-            Event::Mag(t, _) => *t,
+            Event::Mag(t, _) | Event::Baro(t, _) => *t,
         }
     }
 
@@ -35,7 +37,7 @@ impl Event {
     fn rank(&self) -> u8 {
         match self {
             Event::Gnss(_) => 0,
-            Event::Mag(..) => 1,
+            Event::Mag(..) | Event::Baro(..) => 1,
             Event::Ego(_) => 2,
             Event::CloneAt(_) => 3,
         }

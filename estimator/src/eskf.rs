@@ -8,6 +8,7 @@ use nalgebra::{Isometry3, Matrix3, UnitQuaternion, Vector2, Vector3};
 use uavnav_core::magnetic::{MagneticField, MagneticModel, decimal_year};
 use uavnav_core::{Egomotion, ImuSample, Lla, LocalFrame, MotionPrior, VehicleConfig};
 
+use crate::aid_sources::baro_height::{BaroHeightSource, BaroParams};
 use crate::aid_sources::gnss_pos::{GnssMeas, GnssPosSource, white_noise};
 use crate::aid_sources::gnss_vel::GnssVelSource;
 use crate::aid_sources::mag_heading::{MagHeadingSource, MagState, heading_from_field};
@@ -84,6 +85,9 @@ pub struct Eskf {
     /// a date outside the model's validity or unknown.
     mag_field: Option<(MagneticField, f64)>,
     yaw_est: YawEstimator,
+    /// Barometer per-sample pressure σ, Pa, when fitted.
+    baro_sigma_pa: Option<f64>,
+    baro: BaroHeightSource,
     /// The heading may be taken from the course (`EstimatorParams::course_heading`, or a fixed
     /// wing).
     course_heading: bool,
@@ -148,6 +152,8 @@ impl Eskf {
             mag: MagHeadingSource::default(),
             mag_field: None,
             yaw_est: YawEstimator::new(params.yaw_estimator),
+            baro_sigma_pa: config.baro.map(|b| b.sigma_pressure_pa),
+            baro: BaroHeightSource::default(),
             course_heading: params.course_heading
                 || config.airframe == uavnav_core::Airframe::FixedWing,
             yaw_resets: 0,
@@ -248,6 +254,25 @@ impl Eskf {
         if !self.buffer.push(Event::Mag(m.t_ns, r * m.field_t)) {
             self.late_dropped += 1;
         }
+    }
+
+    /// Adds a barometer sample (already validated) to the delay buffer.
+    pub fn push_baro(&mut self, b: &uavnav_core::BaroSample) {
+        if self.baro_sigma_pa.is_none() {
+            return;
+        }
+        if self.horizon_t_ns().is_some_and(|h| b.t_ns <= h) {
+            self.late_dropped += 1;
+            return;
+        }
+        if !self.buffer.push(Event::Baro(b.t_ns, b.pressure_pa)) {
+            self.late_dropped += 1;
+        }
+    }
+
+    /// The barometer source (state, offset, diagnostics).
+    pub fn baro_source(&self) -> &BaroHeightSource {
+        &self.baro
     }
 
     /// Adds a vision egomotion (already validated) to the delay buffer.
@@ -422,6 +447,7 @@ impl Eskf {
         match e {
             Event::Gnss(m) => self.fuse_gnss(&m, &interp(a, b, m.t_ns)),
             Event::Mag(t, m_b) => self.fuse_mag(t, &m_b),
+            Event::Baro(t, pressure) => self.fuse_baro(t, pressure),
             Event::CloneAt(t) => self.take_clone(t),
             Event::Ego(m) => self.fuse_vision(&m),
         }
@@ -579,6 +605,28 @@ impl Eskf {
         self.inject(dx);
     }
 
+    fn fuse_baro(&mut self, t_ns: i64, pressure_pa: f64) {
+        let (Some(x), Some(sigma_pa)) = (self.x, self.baro_sigma_pa) else {
+            return;
+        };
+        let gnss_active = self.gnss_pos.diag.active(t_ns, self.params.aid_timeout_ns);
+        let params = BaroParams {
+            height_sigma_m: self.params.baro_height_sigma_m,
+            offset_walk_m_per_sqrt_s: self.params.baro_offset_walk_m_per_sqrt_s,
+            gate_sigma: self.params.gate_sigma,
+        };
+        let dx = self.baro.process(
+            &x,
+            &mut self.p,
+            t_ns,
+            pressure_pa,
+            sigma_pa,
+            gnss_active,
+            &params,
+        );
+        self.inject(dx);
+    }
+
     fn fuse_gnss(&mut self, m: &GnssMeas, imu: &ImuSample) {
         self.feed_yaw_estimator(m);
         self.manage_heading(m);
@@ -704,6 +752,9 @@ impl Eskf {
             gnss_vel: self.gnss_vel.diag,
             vision_rot: self.vision.rot,
             vision_trans: self.vision.trans,
+            mag: self.mag.diag,
+            baro: self.baro.diag,
+            yaw_resets: self.yaw_resets,
             inputs_rejected: 0,
             late_dropped: self.late_dropped,
             vision_no_clone: self.vision.no_clone,
@@ -720,6 +771,8 @@ impl Eskf {
             gnss_vel: (&self.gnss_vel.diag).into(),
             vision_rot: (&self.vision.rot).into(),
             vision_trans: (&self.vision.trans).into(),
+            mag: (&self.mag.diag).into(),
+            baro: (&self.baro.diag).into(),
             inputs_rejected: 0,
             late_dropped: self.late_dropped,
             vision_no_clone: self.vision.no_clone,

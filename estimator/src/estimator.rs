@@ -155,6 +155,9 @@ impl Estimator {
             return Err(e);
         }
         self.last_baro_t_ns = Some(b.t_ns);
+        if let Profile::Eskf(e) = &mut self.profile {
+            e.push_baro(b);
+        }
         Ok(())
     }
 

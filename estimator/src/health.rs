@@ -46,6 +46,12 @@ pub struct Health {
     pub vision_rot: InnovDiag,
     /// Vision translation diagnostics (direction / metric; paper: eq. 35 velocity).
     pub vision_trans: InnovDiag,
+    /// Magnetometer heading diagnostics (computed even when not fused).
+    pub mag: InnovDiag,
+    /// Barometric height diagnostics (fused only without GNSS height).
+    pub baro: InnovDiag,
+    /// Heading resets from the yaw estimator after alignment.
+    pub yaw_resets: u32,
     /// Inputs refused by validation (NaN, time going backwards, …).
     pub inputs_rejected: u64,
     /// Measurements that arrived behind the fusion horizon and were dropped.
@@ -67,6 +73,9 @@ impl Default for Health {
             gnss_vel: InnovDiag::new(),
             vision_rot: InnovDiag::new(),
             vision_trans: InnovDiag::new(),
+            mag: InnovDiag::new(),
+            baro: InnovDiag::new(),
+            yaw_resets: 0,
             inputs_rejected: 0,
             late_dropped: 0,
             vision_no_clone: 0,
@@ -112,6 +121,10 @@ pub struct PoseHealth {
     pub vision_rot: SourceSummary,
     /// Vision translation (direction / metric; paper: eq. 35 velocity).
     pub vision_trans: SourceSummary,
+    /// Magnetometer heading.
+    pub mag: SourceSummary,
+    /// Barometric height.
+    pub baro: SourceSummary,
     /// Inputs refused by validation (NaN, time going backwards, …).
     pub inputs_rejected: u64,
     /// Measurements that arrived behind the fusion horizon and were dropped.
@@ -130,6 +143,8 @@ impl From<&Health> for PoseHealth {
             gnss_vel: (&h.gnss_vel).into(),
             vision_rot: (&h.vision_rot).into(),
             vision_trans: (&h.vision_trans).into(),
+            mag: (&h.mag).into(),
+            baro: (&h.baro).into(),
             inputs_rejected: h.inputs_rejected,
             late_dropped: h.late_dropped,
             vision_no_clone: h.vision_no_clone,

@@ -115,6 +115,12 @@ pub struct EstimatorParams {
     /// that flies nose first (a fixed wing); a multirotor flies sideways and backwards, so the
     /// default is `false` and the heading comes from the magnetometer or the yaw estimator.
     pub course_heading: bool,
+    /// Barometer: 1-σ height noise per sample beyond the sensor's pressure noise, m (static-port
+    /// and propeller-wash errors: a few decimetres to metres on multirotors).
+    pub baro_height_sigma_m: f64,
+    /// Barometer: random walk of the pressure-height offset, m/√s (weather; the sensor warming
+    /// 3–5 °C in flight: 0.1 gives 0.8 m in a minute, 2.4 m in ten).
+    pub baro_offset_walk_m_per_sqrt_s: f64,
     /// Tuning of the yaw estimator (Gaussian sum of heading hypotheses).
     pub yaw_estimator: crate::yaw_estimator::YawEstimatorParams,
     /// With the heading aligned from the yaw estimator and no magnetometer: GNSS velocity rejected
@@ -156,6 +162,8 @@ impl Default for EstimatorParams {
             mag_heading_sigma_rad: 0.1,
             mag_max_inclination_error_rad: 10f64.to_radians(),
             course_heading: false,
+            baro_height_sigma_m: 0.5,
+            baro_offset_walk_m_per_sqrt_s: 0.1,
             yaw_estimator: crate::yaw_estimator::YawEstimatorParams::default(),
             yaw_reset_timeout_ns: 1_000_000_000,
         }

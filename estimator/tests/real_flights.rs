@@ -35,11 +35,60 @@ fn scored(
 const ALL: Use = Use {
     mag: true,
     baro: true,
+    outage_ns: None,
 };
 const NO_MAG: Use = Use {
     mag: false,
     baro: true,
+    outage_ns: None,
 };
+
+/// Vertical error against the withheld fixes over the last 5 s of a 60 s GNSS outage on
+/// copter_218 (mean of the per-fix differences), with the stated σ of the difference (the
+/// filter's and the fixes' own vertical σ).
+fn outage_vertical_error_m(use_baro: bool) -> Option<(f64, f64)> {
+    let dir = flight_dir("erle_copter_218")?;
+    let f = RealFlight::read(&dir);
+    let (a, b) = (f.imu[0].t_ns + 150 * S, f.imu[0].t_ns + 210 * S);
+    let use_ = Use {
+        mag: true,
+        baro: use_baro,
+        outage_ns: Some((a, b)),
+    };
+    let poses = run(&f, FilterProfile::Eskf, EstimatorParams::default(), use_);
+    let (mut sum, mut n, mut sig2) = (0.0, 0.0, 0.0);
+    for g in f.gnss.iter().filter(|g| g.t_ns >= b - 5 * S && g.t_ns < b) {
+        let p = poses.iter().find(|p| p.t_ns >= g.t_ns)?;
+        sum += p.lla.alt_m - g.alt_m;
+        sig2 += p.sigma_pos_ned_m.z.powi(2) + g.sigma_v_m.powi(2) / 28.0;
+        n += 1.0;
+    }
+    let (err, sigma) = ((sum / n).abs(), (sig2 / n).sqrt());
+    eprintln!(
+        "copter_218 60 s outage, baro={use_baro}: vertical error {err:.2} m over its last 5 s \
+         (stated sigma of the difference {sigma:.2} m)"
+    );
+    Some((err, sigma))
+}
+
+#[test]
+fn copter_218_barometer_holds_the_height_through_a_gnss_outage() {
+    let (Some(with), Some(without)) = (
+        outage_vertical_error_m(true),
+        outage_vertical_error_m(false),
+    ) else {
+        return;
+    };
+    let ((with, sigma), (without, _)) = (with, without);
+    assert!(
+        with < 3.0 * sigma,
+        "with baro {with:.2} m, sigma {sigma:.2} m"
+    );
+    assert!(
+        with < 0.5 * without,
+        "with baro {with:.2} m, without {without:.2} m"
+    );
+}
 
 #[test]
 fn copter_218_all_sensors() {
@@ -103,6 +152,7 @@ fn trace() {
     if config.mag.is_some() {
         ev.extend(f.mag.iter().enumerate().map(|(i, s)| (s.t_ns, 2, i)));
     }
+    ev.extend(f.baro.iter().enumerate().map(|(i, s)| (s.t_ns, 3, i)));
     ev.sort();
     let t0 = f.imu[0].t_ns;
     let mut next = t0;
@@ -114,8 +164,12 @@ fn trace() {
                 let _ = est.push_gnss(&f.gnss[i]);
                 None
             }
-            _ => {
+            2 => {
                 let _ = est.push_mag(&f.mag[i]);
+                None
+            }
+            _ => {
+                let _ = est.push_baro(&f.baro[i]);
                 None
             }
         };

@@ -153,6 +153,8 @@ fn innovation(h: &Health) -> pb::InnovationRatios {
         gnss_position: h.gnss_pos.test_ratio,
         gnss_velocity: h.gnss_vel.test_ratio,
         vision: h.vision_rot.test_ratio.max(h.vision_trans.test_ratio),
+        magnetometer: h.mag.test_ratio,
+        barometer: h.baro.test_ratio,
     }
 }
 

@@ -201,6 +201,8 @@ impl RealFlight {
 pub struct Use {
     pub mag: bool,
     pub baro: bool,
+    /// GNSS fixes in `[t0, t1)` are withheld (a simulated outage).
+    pub outage_ns: Option<(i64, i64)>,
 }
 
 /// Runs the estimator over a real flight (events merged by time, IMU first on ties).
@@ -221,7 +223,16 @@ pub fn run(
     let mut est = Estimator::new(&config, params, None);
     let mut events: Vec<(i64, u8, usize)> = Vec::new();
     events.extend(f.imu.iter().enumerate().map(|(i, s)| (s.t_ns, 0, i)));
-    events.extend(f.gnss.iter().enumerate().map(|(i, s)| (s.t_ns, 1, i)));
+    events.extend(
+        f.gnss
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| {
+                use_.outage_ns
+                    .is_none_or(|(a, b)| s.t_ns < a || s.t_ns >= b)
+            })
+            .map(|(i, s)| (s.t_ns, 1, i)),
+    );
     if config.mag.is_some() {
         events.extend(f.mag.iter().enumerate().map(|(i, s)| (s.t_ns, 2, i)));
     }
