@@ -755,6 +755,7 @@ impl Eskf {
             mag: self.mag.diag,
             baro: self.baro.diag,
             yaw_resets: self.yaw_resets,
+            divergence_resets: 0,
             inputs_rejected: 0,
             late_dropped: self.late_dropped,
             vision_no_clone: self.vision.no_clone,

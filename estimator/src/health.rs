@@ -52,6 +52,9 @@ pub struct Health {
     pub baro: InnovDiag,
     /// Heading resets from the yaw estimator after alignment.
     pub yaw_resets: u32,
+    /// Filter restarts after a detected divergence (paper profile: roll or pitch far from the
+    /// accelerometer's tilt).
+    pub divergence_resets: u32,
     /// Inputs refused by validation (NaN, time going backwards, …).
     pub inputs_rejected: u64,
     /// Measurements that arrived behind the fusion horizon and were dropped.
@@ -76,6 +79,7 @@ impl Default for Health {
             mag: InnovDiag::new(),
             baro: InnovDiag::new(),
             yaw_resets: 0,
+            divergence_resets: 0,
             inputs_rejected: 0,
             late_dropped: 0,
             vision_no_clone: 0,

@@ -129,7 +129,7 @@ fn paper_profile_never_diverges_silently() {
         let Some(s) = scored(name, FilterProfile::Paper, ALL, None) else {
             return;
         };
-        let _ = s;
+        assert_eq!(s.bad_sigma_rows, 0, "{name}: {s}");
     }
 }
 

@@ -96,7 +96,22 @@ pub struct PaperFilter {
     fixes_without_velocity: u64,
     /// The alignment is over (every attitude σ fell below `paper_video_start_sigma_rad`).
     aligned: bool,
+    /// The GNSS course may be taken as the heading (a fixed wing, or `EstimatorParams::
+    /// course_heading`): a multirotor's course says nothing of its heading.
+    course_heading: bool,
+    /// Consecutive fixes at which the attitude's roll or pitch disagreed with the accelerometer's
+    /// tilt (GNSS-acceleration compensated) by more than [`DIVERGED_TILT_RAD`].
+    tilt_disagree: u32,
+    /// Restarts after a detected divergence (kept across them).
+    divergence_resets: u32,
 }
+
+/// Roll or pitch this far from the accelerometer's tilt (with the GNSS acceleration removed) for
+/// [`DIVERGED_FIXES`] fixes in a row means the Euler-angle filter has diverged, rad. Far beyond
+/// what a banked turn's un-modelled acceleration gives once the GNSS acceleration is removed.
+pub const DIVERGED_TILT_RAD: f64 = 0.436; // 25°
+/// Fixes in a row (≈ 2 s at 5 Hz) of tilt disagreement that restart the filters.
+pub const DIVERGED_FIXES: u32 = 10;
 
 impl PaperFilter {
     /// The three filters for one vehicle.
@@ -127,7 +142,12 @@ impl PaperFilter {
             gnss_att_diag: crate::aid_sources::InnovDiag::new(),
             fixes_without_velocity: 0,
             aligned: false,
+            course_heading: false,
+            tilt_disagree: 0,
+            divergence_resets: 0,
         };
+        s.course_heading =
+            s.params.course_heading || config.airframe == uavnav_core::Airframe::FixedWing;
         if let Some(o) = origin {
             s.set_frame(o);
         }
@@ -157,6 +177,8 @@ impl PaperFilter {
         fresh.health = Health::default();
         fresh.aligned = false;
         fresh.fixes_without_velocity = 0;
+        fresh.tilt_disagree = 0;
+        fresh.divergence_resets = 0;
         *self = fresh;
         if let Some(o) = cfg_frame {
             self.set_frame(o);
@@ -279,6 +301,14 @@ impl PaperFilter {
             self.try_init(&meas, &meas_vel, &g, &a_n, &gyro);
             return;
         }
+        if self.diverged(&f_mean, &(g - a_n)) {
+            // Restart from the next fixes (same frame), counted and visible as Initialising.
+            let (resets, frame) = (self.divergence_resets + 1, self.frame);
+            self.reset();
+            self.frame = frame;
+            self.divergence_resets = resets;
+            return;
+        }
         let start_var = self.params.paper_video_start_sigma_rad.powi(2);
         if let Some(att) = self.att.as_mut()
             && !self.aligned
@@ -297,7 +327,11 @@ impl PaperFilter {
                     &(g - a_n),
                     &v_body,
                     course_sigma,
-                    self.params.init_min_speed_mps,
+                    if self.course_heading {
+                        self.params.init_min_speed_mps
+                    } else {
+                        f64::INFINITY
+                    },
                     self.params.gate_sigma,
                     &mut self.gnss_att_diag,
                 );
@@ -319,6 +353,38 @@ impl PaperFilter {
             &mut self.health.gnss_vel,
         );
         self.last_speed_mps = gi.v.norm();
+    }
+
+    /// The divergence check: roll or pitch far from the accelerometer's tilt for
+    /// [`DIVERGED_FIXES`] fixes in a row.
+    fn diverged(&mut self, f_mean: &Vector3<f64>, g_app_n: &Vector3<f64>) -> bool {
+        let Some(att) = self.att.as_ref() else {
+            return false;
+        };
+        let non_finite = !att.euler.iter().all(|v| v.is_finite());
+        // Only where the accelerometer measures the apparent gravity (not in free fall or a
+        // violent manoeuvre).
+        let ratio = f_mean.norm() / g_app_n.norm().max(1e-6);
+        if !non_finite && !(0.8..1.2).contains(&ratio) {
+            return false;
+        }
+        let far = non_finite
+            || attitude_from_gravity(f_mean, g_app_n, att.euler.z).is_some_and(|q| {
+                let (r, p, _) = q.euler_angles();
+                let d = |a: f64, b: f64| {
+                    ((a - b + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                        - std::f64::consts::PI)
+                        .abs()
+                };
+                d(r, att.euler.x) > DIVERGED_TILT_RAD || d(p, att.euler.y) > DIVERGED_TILT_RAD
+            });
+        self.tilt_disagree = if far { self.tilt_disagree + 1 } else { 0 };
+        self.tilt_disagree >= DIVERGED_FIXES
+    }
+
+    /// Restarts after a detected divergence so far.
+    pub fn divergence_resets(&self) -> u32 {
+        self.divergence_resets
     }
 
     fn try_init(
@@ -524,6 +590,7 @@ impl PaperFilter {
     /// Health (mode from the filters' activity).
     pub fn health(&self) -> Health {
         let mut h = self.health;
+        h.divergence_resets = self.divergence_resets;
         let t = self.imu.back().map(|s| s.t_ns).unwrap_or(0);
         let to = self.params.aid_timeout_ns;
         h.mode = match (&self.att, &self.gps_imu) {
