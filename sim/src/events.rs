@@ -60,13 +60,16 @@ impl Flight {
         })
     }
 
-    /// Every sensor event in time order (ties: IMU, then GNSS, then camera). Frames are rendered
-    /// in parallel batches of a few per core, so memory stays bounded.
+    /// Every sensor event in time order, ties broken by [`SensorEvent::rank`] (IMU, GNSS,
+    /// magnetometer, barometer, camera). Frames are rendered in parallel batches of a few per core,
+    /// so memory stays bounded.
     pub fn events(&self) -> impl Iterator<Item = Result<SensorEvent, SimError>> + '_ {
         Events {
             flight: self,
             imu: 0,
             gnss: 0,
+            mag: 0,
+            baro: 0,
             cam: 0,
             frames: VecDeque::new(),
         }
@@ -88,6 +91,8 @@ struct Events<'a> {
     flight: &'a Flight,
     imu: usize,
     gnss: usize,
+    mag: usize,
+    baro: usize,
     cam: usize,
     /// Rendered frames `cam, cam + 1, …` not yet handed out.
     frames: VecDeque<Result<SensorEvent, SimError>>,
@@ -117,8 +122,14 @@ impl Iterator for Events<'_> {
         let f = self.flight;
         let t_imu = f.imu().get(self.imu).map(|s| s.t_ns);
         let t_gnss = f.gnss().get(self.gnss).map(|g| g.t_ns);
+        let t_mag = f.mag().get(self.mag).map(|m| m.t_ns);
+        let t_baro = f.baro().get(self.baro).map(|b| b.t_ns);
         let t_cam = f.camera_times_ns.get(self.cam).copied();
-        let earliest = [t_imu, t_gnss, t_cam].into_iter().flatten().min()?;
+        let earliest = [t_imu, t_gnss, t_mag, t_baro, t_cam]
+            .into_iter()
+            .flatten()
+            .min()?;
+        // Checked in `SensorEvent::rank` order, so equal times leave in that order.
         if t_imu == Some(earliest) {
             self.imu += 1;
             return Some(Ok(SensorEvent::Imu(f.imu()[self.imu - 1])));
@@ -126,6 +137,14 @@ impl Iterator for Events<'_> {
         if t_gnss == Some(earliest) {
             self.gnss += 1;
             return Some(Ok(SensorEvent::Gnss(f.gnss()[self.gnss - 1])));
+        }
+        if t_mag == Some(earliest) {
+            self.mag += 1;
+            return Some(Ok(SensorEvent::Mag(f.mag()[self.mag - 1])));
+        }
+        if t_baro == Some(earliest) {
+            self.baro += 1;
+            return Some(Ok(SensorEvent::Baro(f.baro()[self.baro - 1])));
         }
         self.next_camera()
     }

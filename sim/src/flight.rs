@@ -1,9 +1,11 @@
-//! A whole simulated flight: truth, IMU, GNSS and camera times precomputed from a [`Scenario`].
+//! A whole simulated flight: truth, IMU, GNSS, magnetometer, barometer and camera times
+//! precomputed from a [`Scenario`].
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use uavnav_core::magnetic::MagneticModel;
 use uavnav_core::{
-    CameraConfig, CameraModel, Distortion, GnssConfig, GnssFix, ImuConfig, ImuSample, Lla,
-    LocalFrame, TruthSample, VehicleConfig,
+    BaroConfig, BaroSample, CameraConfig, CameraModel, Distortion, GnssConfig, GnssFix, ImuConfig,
+    ImuSample, Lla, LocalFrame, MagConfig, MagSample, TruthSample, VehicleConfig,
 };
 
 use std::sync::{Arc, OnceLock};
@@ -12,7 +14,9 @@ use uavnav_core::rng::Rng;
 
 use crate::render::RayTable;
 use crate::scenario::Scenario;
-use crate::sensors::{ImuErrors, grid_indices, ideal_imu, simulate_gnss};
+use crate::sensors::{
+    ImuErrors, body_from_mag, grid_indices, ideal_imu, simulate_baro, simulate_gnss, simulate_mag,
+};
 use crate::strapdown::earth_rate_ned;
 use crate::terrain::Terrain;
 use crate::trajectory::Trajectory;
@@ -50,6 +54,12 @@ pub struct Flight {
     ideal: Vec<ImuSample>,
     imu: Vec<ImuSample>,
     gnss: Vec<GnssFix>,
+    mag: Vec<MagSample>,
+    /// The magnetometer's hard-iron residual (zero without a magnetometer), T.
+    mag_bias_t: Vector3<f64>,
+    baro: Vec<BaroSample>,
+    /// The barometer's pressure offset (drift + random walk) at each sample, Pa.
+    baro_offsets_pa: Vec<f64>,
     pub(crate) camera_times_ns: Vec<i64>,
     /// Truth index of each camera frame.
     pub(crate) camera_truth_index: Vec<usize>,
@@ -116,6 +126,21 @@ impl Flight {
         } else {
             Vec::new()
         };
+        let (mag, mag_bias_t) = match &s.mag {
+            Some(m) => {
+                let idx = grid_indices(m.rate_hz, s.imu.rate_hz, n);
+                let field = MagneticModel::field(&origin, s.date_year).ned_t;
+                simulate_mag(m, s.seed, &field, s.t0_ns, &truth, &idx)
+            }
+            None => (Vec::new(), Vector3::zeros()),
+        };
+        let (baro, baro_offsets_pa) = match &s.baro {
+            Some(b) => {
+                let idx = grid_indices(b.rate_hz, s.imu.rate_hz, n);
+                simulate_baro(b, s.seed, &frame, s.t0_ns, &truth, &idx)
+            }
+            None => (Vec::new(), Vec::new()),
+        };
         let camera_truth_index = if s.camera.enabled {
             grid_indices(s.camera.rate_hz, s.imu.rate_hz, n)
         } else {
@@ -129,6 +154,10 @@ impl Flight {
             ideal,
             imu,
             gnss,
+            mag,
+            mag_bias_t,
+            baro,
+            baro_offsets_pa,
             camera_times_ns,
             camera_truth_index,
             terrain: Terrain::new(origin, s.terrain.elevation_m, s.seed),
@@ -168,9 +197,15 @@ impl Flight {
                 lever_arm_body_m: Vector3::from(s.gnss.lever_arm_m),
                 delay_ns: 0,
             }),
-            // The simulator gains a magnetometer and a barometer with issue 17's simulator work.
-            mag: None,
-            baro: None,
+            mag: s.mag.as_ref().map(|m| MagConfig {
+                rate_hz: m.rate_hz,
+                body_from_mag: body_from_mag(m),
+                sigma_t: m.sigma_t,
+            }),
+            baro: s.baro.as_ref().map(|b| BaroConfig {
+                rate_hz: b.rate_hz,
+                sigma_pressure_pa: b.sigma_pressure_pa,
+            }),
             camera: s.camera.enabled.then(|| CameraConfig {
                 rate_hz: s.camera.rate_hz,
                 model: self.camera_model(),
@@ -216,6 +251,33 @@ impl Flight {
     /// The GNSS fixes (none inside outages).
     pub fn gnss(&self) -> &[GnssFix] {
         &self.gnss
+    }
+
+    /// The magnetometer samples (empty without a `[mag]` table).
+    pub fn mag(&self) -> &[MagSample] {
+        &self.mag
+    }
+
+    /// The Earth field the magnetometer sees: WMM2025 at the origin on `date_year`, local NED, T.
+    /// The flight's few kilometres change it by a few nT, below the sensor noise, so it is one
+    /// vector for the whole flight.
+    pub fn mag_field_ned_t(&self) -> Vector3<f64> {
+        MagneticModel::field(&self.origin(), self.scenario.date_year).ned_t
+    }
+
+    /// The magnetometer's constant hard-iron residual in its own axes (zero without one), T.
+    pub fn mag_bias_t(&self) -> Vector3<f64> {
+        self.mag_bias_t
+    }
+
+    /// The barometer samples (empty without a `[baro]` table).
+    pub fn baro(&self) -> &[BaroSample] {
+        &self.baro
+    }
+
+    /// The barometer's pressure offset (weather drift + random walk) at each of its samples, Pa.
+    pub fn baro_offsets_pa(&self) -> &[f64] {
+        &self.baro_offsets_pa
     }
 
     /// Camera frame times (on the IMU grid), ns.

@@ -1,14 +1,14 @@
 //! # uavnav-sim
 //!
 //! A seeded, deterministic, pure (no I/O, no clock) fixed-wing UAV flight simulator. A
-//! [`Scenario`] (TOML) fixes everything; [`Flight::new`] precomputes truth, IMU and GNSS; camera
-//! frames are ray-cast on demand.
+//! [`Scenario`] (TOML) fixes everything; [`Flight::new`] precomputes truth, IMU, GNSS and, when the
+//! scenario fits them, magnetometer and barometer; camera frames are ray-cast on demand.
 //!
 //! | module | what it holds |
 //! |---|---|
 //! | [`scenario`] | the scenario file: serde types, named defaults, errors with line/column |
 //! | [`trajectory`] | closed-form fixed-wing kinematics from smooth commanded profiles |
-//! | [`sensors`] | ideal IMU, IMU error model, GNSS receiver model (lever arm, Gauss–Markov, outages) |
+//! | [`sensors`] | ideal IMU, IMU error model, GNSS receiver model (lever arm, Gauss–Markov, outages), magnetometer (WMM2025), barometer (ISA) |
 //! | [`strapdown`] | a reference strapdown integrator (proves truth and IMU agree) |
 //! | [`flight`] | [`Flight`]: the precomputed flight and its accessors |
 //! | [`events`] | camera frames of a flight and its merged, time-ordered [`SensorEvent`](uavnav_core::SensorEvent) stream |
@@ -32,13 +32,22 @@
 //!   first-order Gauss–Markov (σ, τ) + glitch steps, per NED axis; reported `sigma_h_m` is the
 //!   per-axis horizontal 1-σ `hypot(white, gm)`, likewise `sigma_v_m`. No fixes inside outages.
 //!   Fix and camera times are snapped to the IMU time grid.
+//! - Magnetometer (optional, `[mag]`): `m = R_bmᵀ (s · C_n^b B^n + d^b) + b + n`, `B^n` the
+//!   WMM2025 field at the origin on the scenario's `date_year` (stamps are not UNIX time),
+//!   `R_bm` = `body_from_mag`, `s` a calibration scale error, `d^b` disturbance windows in body
+//!   axes, `b` a constant hard-iron residual drawn once, `n` white.
+//! - Barometer (optional, `[baro]`): `p = p_sl (1 − 2.255 77·10⁻⁵ H)^5.255 88 + drift·t + w(t) + n`,
+//!   the ISA troposphere with `H` the true height above the EGM96 geoid standing in for the
+//!   geopotential height (they differ by `H²/R`, 0.16 m at 1 km), `p_sl` the day's sea-level
+//!   pressure, `w` a random walk; the temperature given is the ISA air temperature at `H`.
+//!   Magnetometer and barometer times are snapped to the IMU grid too.
 //! - Camera: centre `p + C_b^n t_bc`, attitude `nav_from_cam = nav_from_body · R_bc` from the mount
 //!   `body_from_cam` (default nadir: camera z = body down, x = body right, y = body backward).
 //!   Each pixel's undistorted ray is intersected with the ellipsoid of semi-axes (a + h, b + h),
 //!   h = terrain elevation — the "Earth surface" the estimator and vision crates model. Rays that
 //!   miss the ground give [`render::SKY_GRAY`]. Frames are 8-bit gray JPEGs at IMU-grid times.
-//! - Random streams: `Rng::derive(seed, "imu")`, `"gnss"`, `"terrain"`, `"image"`: adding or
-//!   changing one sensor never changes another's noise.
+//! - Random streams: `Rng::derive(seed, "imu")`, `"gnss"`, `"mag"`, `"baro"`, `"terrain"`,
+//!   `"image"`: adding or changing one sensor never changes another's noise.
 
 pub mod events;
 pub mod flight;

@@ -19,6 +19,7 @@ fn shipped_scenarios_parse_and_fly() {
         SMOKE,
         include_str!("../../scenarios/paper-small-lever.toml"),
         include_str!("../../scenarios/paper-big-lever.toml"),
+        include_str!("../../scenarios/mag-baro.toml"),
     ] {
         let s = Scenario::from_toml_str(text).unwrap();
         Flight::new(&s).unwrap();
