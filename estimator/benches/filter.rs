@@ -75,7 +75,7 @@ fn bench(c: &mut Criterion) {
     let m = GnssMeas {
         t_ns: x.t_ns,
         pos_ned_m: x.p + x.q * lever + Vector3::new(0.3, -0.2, 0.5),
-        vel_ned_mps: x.v + Vector3::new(0.02, 0.01, -0.03),
+        vel_ned_mps: Some(x.v + Vector3::new(0.02, 0.01, -0.03)),
         sigma_h_m: 1.58,
         sigma_v_m: 2.6,
         sigma_vel_mps: 0.05,
@@ -163,6 +163,44 @@ fn bench(c: &mut Criterion) {
             || (pc, vision::VisionSource::default()),
             |(mut p, mut src)| {
                 let dx = src.fuse_joint(&xc, &c0, &mut p, &bfc, &ego, &use_);
+                std::hint::black_box((dx, p))
+            },
+            BatchSize::SmallInput,
+        )
+    });
+
+    // Heading sources, per IMU sample (the yaw bank) and per fused compass sample (issue target:
+    // both together ≤ 1 µs per IMU sample).
+    let mut bank = uavnav_estimator::yaw_estimator::YawEstimator::default();
+    bank.fuse_velocity(0, nalgebra::Vector2::new(3.0, 1.0), 0.3);
+    let (gyro, accel) = (
+        Vector3::new(0.01, -0.02, 0.1),
+        Vector3::new(0.3, -0.2, -9.7),
+    );
+    c.bench_function(
+        "yaw_estimator_predict (5 hypotheses, one IMU sample)",
+        |b| {
+            b.iter(|| {
+                bank.predict(&gyro, &accel, 0.005);
+                std::hint::black_box(&bank);
+            })
+        },
+    );
+    let field = uavnav_core::magnetic::MagneticModel::field(
+        &uavnav_core::Lla::from_deg(45.0, 7.0, 300.0),
+        2026.0,
+    );
+    let m_b = x.q.inverse_transform_vector(&field.ned_t) * 0.7;
+    c.bench_function("eskf_mag_heading_update", |b| {
+        b.iter_batched(
+            || {
+                (
+                    p0,
+                    uavnav_estimator::aid_sources::mag_heading::MagHeadingSource::default(),
+                )
+            },
+            |(mut p, mut src)| {
+                let dx = src.fuse(&x, &mut p, &m_b, &field, 0.1, 0.17, 3.29, x.t_ns);
                 std::hint::black_box((dx, p))
             },
             BatchSize::SmallInput,

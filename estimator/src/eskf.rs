@@ -389,7 +389,7 @@ impl Eskf {
     /// interval is accumulated and used as the process noise where it exceeds the configured
     /// densities (`flush_cov`), so the filter's confidence follows the data it is given.
     fn observed_imu_noise(&mut self, a: &ImuSample, b: &ImuSample, dt_s: f64) {
-        if !(dt_s > 0.0) {
+        if dt_s.is_nan() || dt_s <= 0.0 {
             return;
         }
         let dg = (b.gyro_radps - a.gyro_radps).norm_squared();

@@ -122,7 +122,7 @@ impl YawEstimator {
 
     /// Propagates every model over one IMU interval with the mean rates and specific force.
     pub fn predict(&mut self, gyro: &Vector3<f64>, accel: &Vector3<f64>, dt_s: f64) {
-        if !(dt_s > 0.0 && dt_s < 1.0) {
+        if dt_s.is_nan() || dt_s <= 0.0 || dt_s >= 1.0 {
             return;
         }
         if !self.started {

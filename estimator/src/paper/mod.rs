@@ -650,6 +650,7 @@ impl PaperFilter {
 }
 
 /// GNSS-derived attitude pseudo-measurement for the no-video case (see the module doc).
+#[allow(clippy::too_many_arguments)]
 fn gnss_attitude_aiding(
     att: &mut AttitudeEkf,
     f_b: &Vector3<f64>,

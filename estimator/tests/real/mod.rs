@@ -310,8 +310,8 @@ pub fn score(f: &RealFlight, poses: &[PoseOutput], start_ns: i64, end_ns: i64) -
             wrap(p.euler_rad.y - rp),
             wrap(p.euler_rad.z - ry),
         ];
-        for k in 0..3 {
-            sq[k] += e[k] * e[k];
+        for (acc, e) in sq.iter_mut().zip(e) {
+            *acc += e * e;
         }
         s.max_yaw_err_deg = s.max_yaw_err_deg.max(e[2].abs().to_degrees());
         if e[2].abs() <= 3.0 * p.sigma_att_rad.z {
@@ -320,8 +320,8 @@ pub fn score(f: &RealFlight, poses: &[PoseOutput], start_ns: i64, end_ns: i64) -
         n += 1;
     }
     if n > 0 {
-        for k in 0..3 {
-            s.rmse_deg[k] = (sq[k] / n as f64).sqrt().to_degrees();
+        for (out, sum) in s.rmse_deg.iter_mut().zip(sq) {
+            *out = (sum / n as f64).sqrt().to_degrees();
         }
         s.yaw_within_3sigma = within as f64 / n as f64;
     }
