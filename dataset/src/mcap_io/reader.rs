@@ -176,7 +176,7 @@ impl McapDataset {
         truth.sort_by_key(|s| s.t_ns);
         self.truth = (!truth.is_empty()).then_some(truth);
         reference.sort_by_key(|s| s.t_ns);
-        self.reference = (!reference.is_empty()).then(|| crate::Reference {
+        self.reference = (!reference.is_empty()).then_some(crate::Reference {
             source: reference_source,
             samples: reference,
         });
