@@ -47,6 +47,8 @@ pub struct FigureData {
     settle_s: f64,
     /// GNSS outages, s.
     bands: Vec<(f64, f64)>,
+    /// What the runs are compared with, in legends and titles (`truth`, `reference`).
+    against: String,
 }
 
 impl FigureData {
@@ -77,7 +79,15 @@ impl FigureData {
                 .iter()
                 .map(|&(a, b)| (seconds_since(t0_ns, a), seconds_since(t0_ns, b)))
                 .collect(),
+            against: "truth".into(),
         }
+    }
+
+    /// Names what the runs are compared with in legends and titles (default `truth`; a
+    /// reference that is not truth is called so).
+    pub fn against(mut self, short: &str) -> Self {
+        self.against = short.to_owned();
+        self
     }
 }
 
@@ -185,7 +195,7 @@ fn fallback(r: Option<Range>) -> Range {
 impl FigureData {
     fn truth_line(&self, points: &Pts) -> Line {
         Line {
-            label: Some("truth".into()),
+            label: Some(self.against.clone()),
             color: TRUTH_COLOR,
             dashed: false,
             width: 1,
@@ -282,8 +292,8 @@ impl FigureData {
                 let m = err.max(bound) * 1.25;
                 Panel {
                     title: format!(
-                        "{} (estimate − truth; axis scaled after {:.0} s)",
-                        names[k], self.settle_s
+                        "{} (estimate − {}; axis scaled after {:.0} s)",
+                        names[k], self.against, self.settle_s
                     ),
                     y_label: "error [deg]".into(),
                     x: self.x,

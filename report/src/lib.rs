@@ -1,7 +1,10 @@
 //! # uavnav-report
 //!
 //! The accuracy report of `uavnav estimate --report DIR`: given one or more runs of the
-//! estimator over a dataset with truth, [`write_report`] writes into `DIR`
+//! estimator over a dataset with truth, [`write_report`] writes into `DIR` (or, for a dataset
+//! with only a reference such as a flight log's autopilot EKF, [`write_report_against`] with the
+//! reference named for what it is: legends, captions and tables then say "reference", never
+//! "truth")
 //!
 //! | file | content |
 //! |---|---|
@@ -50,6 +53,28 @@ pub struct Run<'a> {
     pub outputs: &'a [PoseOutput],
 }
 
+/// What the runs are scored against.
+#[derive(Debug, Clone, Copy)]
+pub struct Against<'a> {
+    /// Short name for legends and captions: `"truth"`, `"reference"`.
+    pub short: &'a str,
+    /// Full name for the tables: `"truth"`, `"reference (autopilot estimate, EKF1)"`.
+    pub name: &'a str,
+    /// The samples, sorted by time.
+    pub samples: &'a [TruthSample],
+}
+
+impl<'a> Against<'a> {
+    /// Ground truth.
+    pub fn truth(samples: &'a [TruthSample]) -> Self {
+        Against {
+            short: "truth",
+            name: "truth",
+            samples,
+        }
+    }
+}
+
 /// What [`write_report`] computed and wrote.
 #[derive(Debug, Clone)]
 pub struct ReportSummary {
@@ -93,8 +118,21 @@ pub fn write_report_with(
     outages: &[(i64, i64)],
     params: &PlotParams,
 ) -> Result<ReportSummary, ReportError> {
+    write_report_against(dir, runs, Against::truth(truth), outages, params)
+}
+
+/// [`write_report_with`] against truth or a named reference: the figures' legends and captions
+/// use `against.short`, the tables state `against.name`.
+pub fn write_report_against(
+    dir: &Path,
+    runs: &[Run],
+    against: Against,
+    outages: &[(i64, i64)],
+    params: &PlotParams,
+) -> Result<ReportSummary, ReportError> {
+    let truth = against.samples;
     if truth.is_empty() {
-        return Err(ReportError::Empty("no truth samples"));
+        return Err(ReportError::Empty("no truth or reference samples"));
     }
     let t0_ns = runs
         .iter()
@@ -120,12 +158,18 @@ pub fn write_report_with(
         .collect();
     let outputs: Vec<&[PoseOutput]> = runs.iter().map(|r| r.outputs).collect();
     let mut files = Vec::new();
-    let json = tables::accuracy_json(&reports, &outputs, outages)?;
+    let json = tables::accuracy_json(&reports, &outputs, outages, against.name)?;
     files.push(write_text(dir, "accuracy.json", &json)?);
-    let md = tables::accuracy_markdown(&reports, outages, t0_ns, &FIGURES);
+    let captions: Vec<(&str, String)> = FIGURES
+        .iter()
+        .map(|(file, caption)| (*file, caption.replace("truth", against.short)))
+        .collect();
+    let captions: Vec<(&str, &str)> = captions.iter().map(|(f, c)| (*f, c.as_str())).collect();
+    let md = tables::accuracy_markdown(&reports, outages, t0_ns, &captions, against.name);
     files.push(write_text(dir, "accuracy.md", &md)?);
 
-    let data = figures::FigureData::new(runs, truth, outages, t0_ns, t_end_ns);
+    let data =
+        figures::FigureData::new(runs, truth, outages, t0_ns, t_end_ns).against(against.short);
     let panels = [
         data.attitude(),
         data.attitude_error(),

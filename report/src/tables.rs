@@ -45,11 +45,13 @@ fn run_metadata(outputs: &[PoseOutput]) -> Value {
 }
 
 /// `accuracy.json`: an array with one object per run — the fields of
-/// [`AccuracyReport::to_json`] plus `"run"` (metadata), `"outage_windows_ns"` and `"settle_s"`.
+/// [`AccuracyReport::to_json`] plus `"run"` (metadata), `"outage_windows_ns"`, `"settle_s"` and
+/// `"scored_against"` (`"truth"`, or the reference's name).
 pub fn accuracy_json(
     reports: &[AccuracyReport],
     outputs: &[&[PoseOutput]],
     outages: &[(i64, i64)],
+    against: &str,
 ) -> Result<String, ReportError> {
     let mut runs = Vec::with_capacity(reports.len());
     for (report, outs) in reports.iter().zip(outputs) {
@@ -57,6 +59,7 @@ pub fn accuracy_json(
         obj.insert("run".into(), run_metadata(outs));
         obj.insert("outage_windows_ns".into(), json!(outages));
         obj.insert("settle_s".into(), json!(SETTLE_NS as f64 * 1e-9));
+        obj.insert("scored_against".into(), json!(against));
         runs.push(Value::Object(obj));
     }
     Ok(serde_json::to_string_pretty(&Value::Array(runs))?)
@@ -68,8 +71,15 @@ pub fn accuracy_markdown(
     outages: &[(i64, i64)],
     t0_ns: i64,
     figures: &[(&str, &str)],
+    against: &str,
 ) -> String {
     let mut md = String::from("# Accuracy report\n\n");
+    md.push_str(&format!("Scored against: **{against}**."));
+    if against != "truth" {
+        // Another estimator's output: the figures are differences between two estimates.
+        md.push_str(" This is not ground truth: errors below are differences from it.");
+    }
+    md.push_str("\n\n");
     md.push_str(&format!(
         "Attitude RMSE and consistency after the first {:.0} s; outage drift is the horizontal \
          error at the end of each GNSS outage as a percentage of the distance flown in it.\n\n",
