@@ -70,3 +70,54 @@ pub fn progress(len: u64, what: &str) -> indicatif::ProgressBar {
     bar.set_message(what.to_string());
     bar
 }
+
+/// How to read a dataset that may be a flight log (shared by `convert`, `estimate`, `replay` and
+/// `loadtest`, so a log is usable wherever a dataset is).
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct ReadArgs {
+    /// GNSS delay, s (a fix stamped t was valid at t − delay), replacing the dataset's: for a
+    /// flight log the autopilot's own parameter (ArduPilot EK3_GPS_DELAY / EK2_GPS_DELAY /
+    /// EKF_POS_DELAY, PX4 EKF2_GPS_DELAY); for ASL gnss0/sensor.yaml `delay_s`. Fixes keep their
+    /// logged stamps; the estimator subtracts the delay.
+    #[arg(long, value_name = "SECONDS")]
+    pub gnss_delay_s: Option<f64>,
+    /// Flight logs: import what comes before the first damaged byte (a log cut by a power loss)
+    /// instead of failing with the byte offset.
+    #[arg(long)]
+    pub stop_at_damage: bool,
+}
+
+impl ReadArgs {
+    /// The dataset read options.
+    pub fn options(&self) -> uavnav_dataset::ReadOptions {
+        uavnav_dataset::ReadOptions {
+            gnss_delay_s: self.gnss_delay_s,
+            stop_at_damage: self.stop_at_damage,
+            ..uavnav_dataset::ReadOptions::default()
+        }
+    }
+}
+
+/// Prints a dataset's reader notes (a flight log's: rows dropped, assumptions, where a damaged log
+/// was cut) on stderr.
+pub fn print_notes(ds: &uavnav_dataset::Dataset) {
+    for note in ds.notes() {
+        eprintln!("uavnav: {}: {note}", ds.path().display());
+    }
+}
+
+/// A dataset that could not be opened: bad input (exit 2). A damaged flight log's one-line reason
+/// (with its byte offset) gets the option that imports the part before the damage.
+pub fn open_error(e: uavnav_dataset::DatasetError) -> CliError {
+    let damaged = matches!(
+        &e,
+        uavnav_dataset::DatasetError::Log { error, .. } if error.offset().is_some()
+    );
+    if damaged {
+        CliError::input(anyhow::anyhow!(
+            "{e} (--stop-at-damage imports the log up to there)"
+        ))
+    } else {
+        CliError::input(e)
+    }
+}

@@ -1,5 +1,5 @@
-//! `uavnav convert SRC --out DST`: ASL folder ↔ MCAP recording (by the `.mcap` extension), and the
-//! output sink `simulate` shares.
+//! `uavnav convert SRC --out DST`: ASL folder ↔ MCAP recording (by the `.mcap` extension), a
+//! flight log (ArduPilot `.BIN`, PX4 `.ulg`) into either, and the output sink `simulate` shares.
 
 use std::path::{Path, PathBuf};
 
@@ -12,23 +12,50 @@ use crate::common::{CliError, CliResult};
 #[derive(Debug, clap::Args)]
 #[command(after_help = crate::EXIT_CODES)]
 pub struct Args {
-    /// Source: an ASL folder (with `mav0/`) or an `.mcap` recording.
+    /// Source: an ASL folder (with `mav0/`), an `.mcap` recording, or a flight log (ArduPilot
+    /// DataFlash `.BIN`, PX4 ULog `.ulg`; also recognised by its first bytes). A log's autopilot
+    /// estimate is written as a reference (ASL: state_groundtruth_estimate0 marked "NOT ground
+    /// truth"; MCAP: the `reference` topic), never as truth.
     pub src: PathBuf,
     /// Destination: an ASL folder, or an MCAP recording when the path ends in `.mcap`.
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub read: crate::common::ReadArgs,
 }
 
 /// Runs the command.
 pub fn run(args: Args) -> CliResult {
     let started = std::time::Instant::now();
-    let s = uavnav_dataset::convert::convert(&args.src, &args.out).map_err(CliError::input)?;
+    if uavnav_dataset::Format::of_path(&args.out) == uavnav_dataset::Format::Log {
+        return Err(CliError::input(anyhow::anyhow!(
+            "{}: flight logs are read, not written: give an ASL folder or an .mcap file",
+            args.out.display()
+        )));
+    }
+    let options = args.read.options();
+    let ds = uavnav_dataset::Dataset::open_with(&args.src, &options)
+        .map_err(crate::common::open_error)?;
+    crate::common::print_notes(&ds);
+    let s = match uavnav_dataset::Format::of_path(&args.out) {
+        uavnav_dataset::Format::Mcap => {
+            uavnav_dataset::convert::write_mcap(&ds, &args.out, &McapOptions::default())
+        }
+        _ => uavnav_dataset::convert::write_asl(&ds, &args.out),
+    }
+    .map_err(CliError::input)?;
+    let reference = match (s.reference, ds.reference()) {
+        (n, Some(r)) if n > 0 => format!(", {n} {}", r.label()),
+        _ => String::new(),
+    };
     println!(
-        "{} -> {}: {} IMU, {} GNSS, {} frames, {} truth{} in {:.1} s",
+        "{} -> {}: {} IMU, {} GNSS, {} mag, {} baro, {} frames, {} truth{reference}{} in {:.1} s",
         args.src.display(),
         args.out.display(),
         s.imu,
         s.gnss,
+        s.mag,
+        s.baro,
         s.frames,
         s.truth,
         if s.skipped_images > 0 {

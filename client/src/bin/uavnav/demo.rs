@@ -330,7 +330,18 @@ fn print_table(
             Some(wire),
         ));
     }
-    println!("Accuracy against the simulator's truth (after the first 5 s; eskf, IMU+GNSS+video):");
+    // The sources the offline run fused (its estimator's counters), not the ones configured.
+    let fused: Vec<&str> = std::iter::once("IMU")
+        .chain(
+            crate::estimate_report::fused_sources(offline.last().map(|p| &p.health))
+                .into_iter()
+                .filter_map(|(name, fused)| fused.then_some(name)),
+        )
+        .collect();
+    println!(
+        "Accuracy against the simulator's truth (after the first 5 s; eskf, {}):",
+        fused.join("+")
+    );
     println!(
         "| run | poses | roll RMSE ° | pitch RMSE ° | yaw RMSE ° | position RMSE m | max diff vs offline |"
     );

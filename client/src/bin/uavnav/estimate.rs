@@ -1,4 +1,5 @@
-//! `uavnav estimate DATASET`: offline poses at IMU rate from an ASL folder or an MCAP recording.
+//! `uavnav estimate DATASET`: offline poses at IMU rate from an ASL folder, an MCAP recording or
+//! a flight log.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -14,7 +15,8 @@ use crate::common::{CliError, CliResult};
 #[derive(Debug, clap::Args)]
 #[command(after_help = crate::EXIT_CODES)]
 pub struct Args {
-    /// An ASL folder (with `mav0/`) or an `.mcap` recording.
+    /// An ASL folder (with `mav0/`), an `.mcap` recording, or a flight log (ArduPilot DataFlash
+    /// `.BIN`, PX4 ULog `.ulg`).
     pub dataset: PathBuf,
     /// Filter profile: `eskf` (default) or `paper` (the paper's three EKFs).
     #[arg(long, default_value = "eskf", value_parser = parse_profile)]
@@ -31,9 +33,13 @@ pub struct Args {
     /// Also write the trajectory in the TUM format (time s, NED position from the first fix, qx qy qz qw).
     #[arg(long)]
     pub tum: Option<PathBuf>,
-    /// Where the dataset has truth: write an accuracy table (JSON, Markdown) and PNG plots here.
+    /// Write an accuracy table (JSON, Markdown) and PNG plots here, scored against the dataset's
+    /// truth or, without truth, against its reference (a flight log's autopilot estimate, named
+    /// as such and never called truth). Each run is labelled with the sources it fused.
     #[arg(long)]
     pub report: Option<PathBuf>,
+    #[command(flatten)]
+    pub read: crate::common::ReadArgs,
 }
 
 fn parse_profile(s: &str) -> Result<FilterProfile, String> {
@@ -49,19 +55,62 @@ pub struct RunOutput {
     pub rejected: u64,
     /// GNSS fix times seen (for outage detection).
     pub gnss_t_ns: Vec<i64>,
-    /// The dataset's truth origin, if any (the frame of its truth).
+    /// The dataset's truth origin, if any (the frame of its truth or reference).
     pub origin: Option<uavnav_core::Lla>,
+    /// Inputs the estimator accepted, per sensor.
+    pub fed: Fed,
+    /// The reader's notes (a flight log's import notes).
+    pub notes: Vec<String>,
+}
+
+/// Inputs the estimator accepted, per sensor.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct Fed {
+    /// IMU samples.
+    pub imu: u64,
+    /// GNSS fixes.
+    pub gnss: u64,
+    /// Magnetometer samples.
+    pub mag: u64,
+    /// Barometer samples.
+    pub baro: u64,
+    /// Camera frames.
+    pub camera: u64,
+}
+
+impl Fed {
+    fn count(&mut self, ev: &SensorEvent) {
+        match ev {
+            SensorEvent::Imu(_) => self.imu += 1,
+            SensorEvent::Gnss(_) => self.gnss += 1,
+            SensorEvent::Mag(_) => self.mag += 1,
+            SensorEvent::Baro(_) => self.baro += 1,
+            SensorEvent::Camera(_) => self.camera += 1,
+        }
+    }
+}
+
+/// What a run is scored against: ground truth, or a reference that is not truth.
+#[derive(Debug, Clone)]
+pub struct Comparison {
+    /// `"truth"` or `"reference"` (legends and captions).
+    pub short: &'static str,
+    /// `"truth"` or the reference's label, e.g. `reference (autopilot estimate, EKF1)`.
+    pub name: String,
+    /// The samples.
+    pub samples: Vec<TruthSample>,
 }
 
 /// Runs one dataset through a [`VehicleRunner`] with vision inline; calls `sink` per pose.
 pub fn run_dataset(
     path: &Path,
+    read: &uavnav_dataset::ReadOptions,
     profile: FilterProfile,
     use_vision: bool,
     use_gnss: bool,
     mut sink: impl FnMut(&PoseOutput) -> anyhow::Result<()>,
-) -> Result<(RunOutput, Option<Vec<TruthSample>>), CliError> {
-    let ds = uavnav_dataset::Dataset::open(path).map_err(CliError::input)?;
+) -> Result<(RunOutput, Option<Comparison>), CliError> {
+    let ds = uavnav_dataset::Dataset::open_with(path, read).map_err(crate::common::open_error)?;
     let mut config = ds.config().clone();
     config.profile = profile;
     let params = RunnerParams {
@@ -72,9 +121,24 @@ pub fn run_dataset(
     // The local frame is fixed at the first GNSS fix, exactly as in the service, so that the same
     // input gives the same poses offline and online; the report maps poses into the truth frame.
     let mut runner = VehicleRunner::new(config, params, None);
-    let truth = ds.truth().map(|t| t.to_vec());
+    // Truth first; a reference (another estimator's output) only where there is no truth, and
+    // under its own name.
+    let comparison = match (ds.truth(), ds.reference()) {
+        (Some(t), _) => Some(Comparison {
+            short: "truth",
+            name: "truth".into(),
+            samples: t.to_vec(),
+        }),
+        (None, Some(r)) => Some(Comparison {
+            short: "reference",
+            name: r.label(),
+            samples: r.samples.clone(),
+        }),
+        (None, None) => None,
+    };
     let mut out = RunOutput {
         origin: ds.origin(),
+        notes: ds.notes().to_vec(),
         ..RunOutput::default()
     };
     for ev in ds.events().map_err(CliError::input)? {
@@ -82,8 +146,12 @@ pub fn run_dataset(
         if let SensorEvent::Gnss(g) = &ev {
             out.gnss_t_ns.push(g.t_ns);
         }
+        // Counted only when the estimator accepts the input.
+        let mut fed = out.fed;
+        fed.count(&ev);
         match runner.push_inline(ev) {
             Ok(poses) => {
+                out.fed = fed;
                 for p in poses {
                     sink(&p).map_err(CliError::runtime)?;
                     out.poses.push(p);
@@ -97,7 +165,7 @@ pub fn run_dataset(
             }
         }
     }
-    Ok((out, truth))
+    Ok((out, comparison))
 }
 
 /// Runs the command.
@@ -116,8 +184,9 @@ pub fn run(args: Args) -> CliResult {
         None => None,
     };
     let started = std::time::Instant::now();
-    let (out, truth) = run_dataset(
+    let (out, comparison) = run_dataset(
         &args.dataset,
+        &args.read.options(),
         args.profile,
         !args.no_vision,
         !args.no_gnss,
@@ -133,21 +202,25 @@ pub fn run(args: Args) -> CliResult {
     if let Some(t) = tum.as_mut() {
         t.flush().map_err(CliError::runtime)?;
     }
+    for note in &out.notes {
+        eprintln!("uavnav: {}: {note}", args.dataset.display());
+    }
     eprintln!(
-        "uavnav: {} poses in {:.2} s ({} inputs refused) -> {}",
+        "uavnav: {} poses in {:.2} s ({} inputs refused; fused {}) -> {}",
         out.poses.len(),
         started.elapsed().as_secs_f64(),
         out.rejected,
+        crate::estimate_report::sources_label(&out),
         args.out.display()
     );
     if let Some(dir) = &args.report {
-        let Some(truth) = truth else {
+        let Some(comparison) = comparison else {
             return Err(CliError::input(anyhow::anyhow!(
-                "--report needs truth, and {} has none",
+                "--report needs truth or a reference, and {} has neither",
                 args.dataset.display()
             )));
         };
-        crate::estimate_report::write(dir, &args, &out, &truth)?;
+        crate::estimate_report::write(dir, &args, &out, &comparison)?;
     }
     Ok(())
 }

@@ -50,9 +50,12 @@ pub struct Args {
     /// Leave camera frames out.
     #[arg(long)]
     pub no_camera: bool,
-    /// Replay this recording (ASL folder or MCAP) instead of the simulated smoke flight.
+    /// Replay this recording (ASL folder, MCAP, or a flight log: ArduPilot `.BIN`, PX4 `.ulg`)
+    /// instead of the simulated smoke flight.
     #[arg(long)]
     pub recording: Option<PathBuf>,
+    #[command(flatten)]
+    pub read: crate::common::ReadArgs,
     /// Find the largest N sustained in real time.
     #[arg(long)]
     pub ramp: bool,
@@ -124,7 +127,9 @@ fn build_recording(args: &Args, camera: bool) -> Result<Recording, CliError> {
     };
     let messages = match &args.recording {
         Some(path) => {
-            let ds = uavnav_dataset::Dataset::open(path).map_err(CliError::input)?;
+            let ds = uavnav_dataset::Dataset::open_with(path, &args.read.options())
+                .map_err(crate::common::open_error)?;
+            crate::common::print_notes(&ds);
             let mut config = ds.config().clone();
             if !camera {
                 config.camera = None;

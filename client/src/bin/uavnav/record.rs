@@ -155,7 +155,8 @@ impl McapSink {
 /// Whether a dataset carries a configuration (MCAP recordings may not).
 pub fn has_config(ds: &uavnav_dataset::Dataset) -> bool {
     match ds.format() {
-        uavnav_dataset::Format::Asl => true,
+        // A flight log's configuration is derived by the import (rates, noise, GNSS delay).
+        uavnav_dataset::Format::Asl | uavnav_dataset::Format::Log => true,
         uavnav_dataset::Format::Mcap => {
             uavnav_dataset::mcap_io::reader::McapDataset::open(ds.path(), Some(ds.vehicle_id()))
                 .map(|m| m.has_config())

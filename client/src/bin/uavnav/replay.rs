@@ -21,7 +21,9 @@ use crate::endpoint::{DEFAULT_URL, block_on, client_err, connect};
 #[derive(Debug, clap::Args)]
 #[command(after_help = crate::EXIT_CODES)]
 pub struct Args {
-    /// An ASL folder, an `.mcap` dataset, or a fleet recording made by `uavnav record`.
+    /// An ASL folder, an `.mcap` dataset, a fleet recording made by `uavnav record`, or a flight
+    /// log (ArduPilot `.BIN`, PX4 `.ulg`; its derived configuration, GNSS delay included, is sent
+    /// first).
     pub dataset: PathBuf,
     /// Service URL (grpc://HOST:PORT, zenoh, zenoh/tcp/HOST:PORT).
     #[arg(long, env = "UAVNAV_SERVICE", default_value = DEFAULT_URL)]
@@ -47,6 +49,8 @@ pub struct Args {
     /// Do not send the recorded vehicle configuration first.
     #[arg(long)]
     pub no_config: bool,
+    #[command(flatten)]
+    pub read: crate::common::ReadArgs,
 }
 
 /// Opens a fresh reader of one vehicle's events (called once per copy, on a blocking thread).
@@ -69,7 +73,10 @@ pub struct Stream {
 
 /// The vehicle streams of a dataset: one for an ASL folder, one per vehicle of an MCAP recording
 /// (a single-vehicle dataset or a fleet recording made by `uavnav record`).
-pub fn open_streams(path: &std::path::Path) -> Result<Vec<Stream>, CliError> {
+pub fn open_streams(
+    path: &std::path::Path,
+    read: &uavnav_dataset::ReadOptions,
+) -> Result<Vec<Stream>, CliError> {
     use uavnav_dataset::{Dataset, Format, ReadOptions};
     let vehicles: Vec<Option<String>> = match Format::of_path(path) {
         Format::Mcap => uavnav_dataset::mcap_io::reader::vehicles(path)
@@ -77,21 +84,22 @@ pub fn open_streams(path: &std::path::Path) -> Result<Vec<Stream>, CliError> {
             .into_iter()
             .map(Some)
             .collect(),
-        Format::Asl => vec![None],
+        Format::Asl | Format::Log => vec![None],
     };
     let mut out = Vec::new();
     for vehicle in vehicles {
         let options = ReadOptions {
             vehicle: vehicle.clone(),
-            ..ReadOptions::default()
+            ..read.clone()
         };
-        let ds = Dataset::open_with(path, &options).map_err(CliError::input)?;
+        let ds = Dataset::open_with(path, &options).map_err(crate::common::open_error)?;
+        crate::common::print_notes(&ds);
         let config = crate::record::has_config(&ds).then(|| pb::VehicleConfig::from(ds.config()));
-        let p = path.to_path_buf();
+        // Each copy streams from a clone of the opened dataset (a flight log is imported once).
+        let opened = ds.clone();
         let open: OpenEvents = Arc::new(move || {
-            let ds = Dataset::open_with(&p, &options)?;
             let events: Box<dyn Iterator<Item = anyhow::Result<uavnav_core::SensorEvent>> + Send> =
-                Box::new(ds.events()?.map(|e| e.map_err(anyhow::Error::from)));
+                Box::new(opened.events()?.map(|e| e.map_err(anyhow::Error::from)));
             Ok(events)
         });
         out.push(Stream {
@@ -123,7 +131,7 @@ pub fn run(args: Args) -> CliResult {
     if !(args.speed > 0.0 && args.speed.is_finite()) {
         return Err(CliError::input(anyhow::anyhow!("--speed must be positive")));
     }
-    let streams = open_streams(&args.dataset)?;
+    let streams = open_streams(&args.dataset, &args.read.options())?;
     if args.id_prefix.is_some() && streams.len() > 1 {
         return Err(CliError::input(anyhow::anyhow!(
             "--id-prefix needs a single-vehicle recording ({} vehicles here)",

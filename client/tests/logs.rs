@@ -1,0 +1,241 @@
+//! Flight logs where a dataset goes, through the `uavnav` binary: `convert` of a real ArduPilot
+//! log to ASL and MCAP checked against the shared ASL conversion of the same log, `estimate` of a
+//! real log end to end with a report scored against the autopilot's estimate (named as a
+//! reference, never truth), and a cut log refused with its byte offset and exit code 2.
+//! Skips with a message when `../shared/data` is absent.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_uavnav");
+
+/// `../shared/data/real_flights` beside the workspace (this crate is `<workspace>/client`).
+fn real_flights() -> Option<PathBuf> {
+    let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"));
+    if p.is_dir() {
+        Some(p.join("real_flights"))
+    } else {
+        eprintln!("skipping: {} not found (shared real flights)", p.display());
+        None
+    }
+}
+
+fn run(args: &[&str]) -> Output {
+    let out = Command::new(BIN).args(args).output().expect("uavnav runs");
+    eprintln!(
+        "$ uavnav {}\n-> {:?}\nstdout: {}\nstderr: {}",
+        args.join(" "),
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// The data rows of a `data.csv` (header and comments skipped).
+fn rows(path: &Path) -> Vec<String> {
+    std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(str::to_owned)
+        .collect()
+}
+
+fn stamp(row: &str) -> i64 {
+    row.split(',')
+        .next()
+        .and_then(|c| c.parse().ok())
+        .expect("stamp")
+}
+
+fn values(row: &str) -> Vec<f64> {
+    row.split(',')
+        .skip(1)
+        .map(|c| c.trim().parse().unwrap_or(f64::NAN))
+        .collect()
+}
+
+/// Within the shared CSVs' print precision (their README: `%.9g` IMU and references, `%.9f` /
+/// `%.4f` GNSS, `%.6e` MAG, `%.3f` / `%.2f` BARO); GNSS altitude to 5 mm, as the shared ASL adds
+/// the geoid height at the EKF origin to every fix where the importer adds it at each fix.
+fn close(folder: &str, col: usize, u: f64, v: f64) -> bool {
+    let tol = match (folder, col) {
+        ("gnss0", 0 | 1) => 1e-9,
+        ("gnss0", 2) => 5e-3,
+        ("gnss0", _) => 6e-5,
+        ("baro0", _) => 6e-3,
+        ("mag0", _) => 5e-7 * v.abs() + 1e-15,
+        _ => 6e-9 * v.abs() + 1e-9,
+    };
+    (u - v).abs() <= tol
+}
+
+#[test]
+fn convert_ardupilot_log_matches_the_shared_asl_folder() {
+    let Some(root) = real_flights() else {
+        return;
+    };
+    let raw = root.join("raw/erle_copter_218.BIN");
+    let shared = root.join("erle_copter_218/mav0");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let asl = dir.path().join("asl");
+    let out = run(&[
+        "convert",
+        raw.to_str().expect("path"),
+        "--out",
+        asl.to_str().expect("path"),
+    ]);
+    assert_eq!(out.status.code(), Some(0));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("16750 IMU, 1692 GNSS, 3350 mag, 3350 baro, 0 frames, 0 truth, 3022 reference (autopilot estimate, EKF1)"),
+        "{text}"
+    );
+    let ours = asl.join("mav0");
+    for folder in [
+        "imu0",
+        "gnss0",
+        "mag0",
+        "baro0",
+        "state_groundtruth_estimate0",
+    ] {
+        let (a, b) = (
+            rows(&ours.join(folder).join("data.csv")),
+            rows(&shared.join(folder).join("data.csv")),
+        );
+        assert_eq!(a.len(), b.len(), "{folder} rows");
+        for (x, y) in a.iter().zip(&b) {
+            // The shared ASL stamps fixes at T − 220 ms (EKF_POS_DELAY); ours keep the logged T
+            // and carry the delay in gnss0/sensor.yaml.
+            let shift = if folder == "gnss0" { 220_000_000 } else { 0 };
+            assert_eq!(stamp(x) - shift, stamp(y), "{folder} stamp");
+            let (mut u, v) = (values(x), values(y));
+            if folder == "state_groundtruth_estimate0" && u[3] * v[3] < 0.0 {
+                // q and −q are the same rotation (the converters' Euler formulas differ in sign)
+                u[3..7].iter_mut().for_each(|c| *c = -*c);
+            }
+            for (col, (u, v)) in u.iter().zip(v).enumerate() {
+                assert!(close(folder, col, *u, v), "{folder}: {x} vs {y}");
+            }
+        }
+    }
+    let gnss_yaml = std::fs::read_to_string(ours.join("gnss0/sensor.yaml")).expect("yaml");
+    assert!(gnss_yaml.contains("delay_s: 0.22"), "{gnss_yaml}");
+    let ref_yaml = std::fs::read_to_string(ours.join("state_groundtruth_estimate0/sensor.yaml"))
+        .expect("yaml");
+    assert!(ref_yaml.contains("NOT ground truth"), "{ref_yaml}");
+
+    let mcap = dir.path().join("x.mcap");
+    let out = run(&[
+        "convert",
+        raw.to_str().expect("path"),
+        "--out",
+        mcap.to_str().expect("path"),
+        "--gnss-delay-s",
+        "0.2",
+    ]);
+    assert_eq!(out.status.code(), Some(0));
+    let ds = uavnav_dataset::Dataset::open(&mcap).expect("MCAP");
+    assert!(ds.truth().is_none());
+    assert_eq!(ds.reference().map(|r| r.samples.len()), Some(3022));
+    assert_eq!(ds.config().gnss.map(|g| g.delay_ns), Some(200_000_000));
+    let mut counts = [0usize; 4];
+    for e in ds.events().expect("events") {
+        match e.expect("event") {
+            uavnav_core::SensorEvent::Imu(_) => counts[0] += 1,
+            uavnav_core::SensorEvent::Gnss(_) => counts[1] += 1,
+            uavnav_core::SensorEvent::Mag(_) => counts[2] += 1,
+            uavnav_core::SensorEvent::Baro(_) => counts[3] += 1,
+            uavnav_core::SensorEvent::Camera(_) => panic!("no camera in the log"),
+        }
+    }
+    let shared_counts =
+        ["imu0", "gnss0", "mag0", "baro0"].map(|f| rows(&shared.join(f).join("data.csv")).len());
+    assert_eq!(counts, shared_counts);
+}
+
+#[test]
+fn estimate_a_real_log_with_a_report_against_the_autopilot_reference() {
+    let Some(root) = real_flights() else {
+        return;
+    };
+    let raw = root.join("raw/erle_plane_E.BIN");
+    let raw = raw.to_str().expect("path");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let poses = dir.path().join("poses.csv");
+    let report = dir.path().join("report");
+    let (poses_s, report_s) = (
+        poses.to_str().expect("path"),
+        report.to_str().expect("path"),
+    );
+
+    // plane_E's logger stopped inside its last message: refused with the offset by default
+    let out = run(&["estimate", raw, "--out", poses_s]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("erle_plane_E.BIN") && err.contains("truncated at byte 1794025"),
+        "{err}"
+    );
+
+    let out = run(&[
+        "estimate",
+        raw,
+        "--stop-at-damage",
+        "--out",
+        poses_s,
+        "--report",
+        report_s,
+    ]);
+    assert_eq!(out.status.code(), Some(0));
+    let rows = rows(&poses);
+    assert!(rows.len() > 5000, "{} poses", rows.len());
+    for r in &rows {
+        assert!(!r.contains("NaN") && !r.contains("inf"), "{r}");
+    }
+    for f in [
+        "accuracy.json",
+        "accuracy.md",
+        "attitude.png",
+        "attitude_error.png",
+        "velocity_ned.png",
+        "position_down.png",
+        "horizontal_error.png",
+    ] {
+        assert!(report.join(f).is_file(), "{f} missing");
+    }
+    let md = std::fs::read_to_string(report.join("accuracy.md")).expect("md");
+    assert!(
+        md.contains("Scored against: **reference (autopilot estimate, EKF1)**"),
+        "{md}"
+    );
+    assert!(md.contains("not ground truth"));
+    assert!(!md.contains("against truth"), "{md}");
+    // the plane logged no camera, magnetometer or barometer
+    assert!(md.contains("eskf, IMU+GNSS |"), "{md}");
+    assert!(!md.contains("video"), "{md}");
+    let json = std::fs::read_to_string(report.join("accuracy.json")).expect("json");
+    assert!(json.contains("\"scored_against\": \"reference (autopilot estimate, EKF1)\""));
+}
+
+#[test]
+fn a_cut_log_is_refused_with_its_byte_offset() {
+    let Some(root) = real_flights() else {
+        return;
+    };
+    let data = std::fs::read(root.join("raw/erle_copter_218.BIN")).expect("log");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cut = dir.path().join("cut.BIN");
+    std::fs::write(&cut, &data[..1_000_003]).expect("write");
+    let out = run(&[
+        "convert",
+        cut.to_str().expect("path"),
+        "--out",
+        dir.path().join("x").to_str().expect("path"),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("cut.BIN") && err.contains("at byte"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
+}
