@@ -14,16 +14,17 @@ use uavnav_core::rng::Rng;
 
 use crate::render::RayTable;
 use crate::scenario::Scenario;
+use crate::scenario::TrajectoryKind;
 use crate::sensors::{
     ImuErrors, body_from_mag, grid_indices, ideal_imu, simulate_baro, simulate_gnss, simulate_mag,
 };
 use crate::strapdown::earth_rate_ned;
 use crate::terrain::Terrain;
-use crate::trajectory::Trajectory;
+use crate::trajectory::FlightPath;
 
 /// Lowest height above the terrain a scenario may fly, m.
 pub const MIN_HEIGHT_AGL_M: f64 = 10.0;
-/// Steepest bank a scenario may command, rad (60°).
+/// Steepest bank (fixed wing) or tilt (multirotor) a scenario may command, rad (60°).
 pub const MAX_BANK_RAD: f64 = std::f64::consts::FRAC_PI_3;
 
 /// Why a flight cannot be simulated or a frame not produced.
@@ -92,7 +93,7 @@ impl Flight {
         let origin = Lla::from_deg(s.origin.lat_deg, s.origin.lon_deg, s.origin.alt_m);
         let frame = LocalFrame::new(origin);
         let omega_ie = earth_rate_ned(origin.lat_rad);
-        let traj = Trajectory::new(&s.trajectory);
+        let traj = FlightPath::new(&s.trajectory);
         let times_s: Vec<f64> = (0..n).map(|k| (k as i64 * dt_ns) as f64 * 1e-9).collect();
         let positions = traj.positions(&times_s);
         let mut errors = ImuErrors::new(&s.imu, s.seed, dt_ns as f64 * 1e-9);
@@ -105,7 +106,7 @@ impl Flight {
         for (k, (t_s, p)) in times_s.iter().zip(&positions).enumerate() {
             let t_ns = s.t0_ns + k as i64 * dt_ns;
             let kin = traj.kinematics(*t_s);
-            check_state(&frame, s, *t_s, p, kin.euler_rad.x)?;
+            check_state(&frame, s, *t_s, p, traj.limiting_angle_rad(&kin))?;
             let clean = ideal_imu(t_ns, &kin, &frame.gravity_ned(p), &omega_ie);
             let (noisy, bg, ba) = errors.apply(&clean);
             truth.push(TruthSample {
@@ -213,8 +214,11 @@ impl Flight {
             }),
             terrain_elevation_m: s.terrain.elevation_m,
             profile: Default::default(),
-            // the simulator's trajectories are fixed-wing kinematics (`trajectory`)
-            airframe: uavnav_core::Airframe::FixedWing,
+            // which kinematics flew it: the estimator may take a fixed wing's heading from its course
+            airframe: match s.trajectory.kind {
+                TrajectoryKind::FixedWing => uavnav_core::Airframe::FixedWing,
+                TrajectoryKind::Multirotor => uavnav_core::Airframe::Multirotor,
+            },
         }
     }
 
@@ -349,12 +353,20 @@ fn check_state(
     s: &Scenario,
     t_s: f64,
     p: &Vector3<f64>,
-    bank_rad: f64,
+    limiting_angle_rad: f64,
 ) -> Result<(), SimError> {
-    if bank_rad.abs() > MAX_BANK_RAD {
+    if limiting_angle_rad > MAX_BANK_RAD {
+        let what = match s.trajectory.kind {
+            TrajectoryKind::FixedWing => "bank",
+            TrajectoryKind::Multirotor => "tilt",
+        };
+        let fix = match s.trajectory.kind {
+            TrajectoryKind::FixedWing => "reduce the turn rate or speed",
+            TrajectoryKind::Multirotor => "lengthen the velocity change's ramp_s",
+        };
         return Err(SimError::Invalid(format!(
-            "bank {:.1}° at t = {t_s:.2} s exceeds {:.0}°: reduce the turn rate or speed",
-            bank_rad.to_degrees(),
+            "{what} {:.1}° at t = {t_s:.2} s exceeds {:.0}°: {fix}",
+            limiting_angle_rad.to_degrees(),
             MAX_BANK_RAD.to_degrees()
         )));
     }

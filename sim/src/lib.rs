@@ -1,13 +1,14 @@
 //! # uavnav-sim
 //!
-//! A seeded, deterministic, pure (no I/O, no clock) fixed-wing UAV flight simulator. A
+//! A seeded, deterministic, pure (no I/O, no clock) UAV flight simulator, fixed wing or multirotor. A
 //! [`Scenario`] (TOML) fixes everything; [`Flight::new`] precomputes truth, IMU, GNSS and, when the
 //! scenario fits them, magnetometer and barometer; camera frames are ray-cast on demand.
 //!
 //! | module | what it holds |
 //! |---|---|
 //! | [`scenario`] | the scenario file: serde types, named defaults, errors with line/column |
-//! | [`trajectory`] | closed-form fixed-wing kinematics from smooth commanded profiles |
+//! | [`trajectory`] | closed-form fixed-wing kinematics from smooth commanded profiles; [`FlightPath`](trajectory::FlightPath) picks the kind |
+//! | [`multirotor`] | closed-form multirotor kinematics: NED velocity and yaw commanded apart, tilt from the thrust |
 //! | [`sensors`] | ideal IMU, IMU error model, GNSS receiver model (lever arm, Gauss–Markov, outages), magnetometer (WMM2025), barometer (ISA) |
 //! | [`strapdown`] | a reference strapdown integrator (proves truth and IMU agree) |
 //! | [`flight`] | [`Flight`]: the precomputed flight and its accessors |
@@ -51,6 +52,7 @@
 
 pub mod events;
 pub mod flight;
+pub mod multirotor;
 pub mod render;
 pub mod scenario;
 pub mod sensors;

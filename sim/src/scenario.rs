@@ -9,6 +9,13 @@
 use serde::de::Error as _;
 use serde::{Deserialize, Deserializer};
 
+mod mag_baro;
+
+pub use mag_baro::{
+    BaroSpec, DEFAULT_BARO_SIGMA_PA, DEFAULT_MAG_BARO_RATE_HZ, DEFAULT_MAG_BIAS_SIGMA_T,
+    DEFAULT_MAG_SIGMA_T, ISA_SEA_LEVEL_PA, MagDisturbanceSpec, MagSpec,
+};
+
 /// Default start time of a flight, ns (1000 s: clear of zero so that time arithmetic bugs show).
 pub const DEFAULT_T0_NS: i64 = 1_000_000_000_000;
 /// Default origin latitude, degrees (near Capua, Italy, where the paper's authors fly).
@@ -37,18 +44,6 @@ pub const DEFAULT_TERRAIN_ELEVATION_M: f64 = 50.0;
 /// start at `t0_ns`, which is not UNIX time, so the date the magnetic field is evaluated at is
 /// given on its own.
 pub const DEFAULT_DATE_YEAR: f64 = 2026.5;
-/// Default magnetometer and barometer rate, Hz.
-pub const DEFAULT_MAG_BARO_RATE_HZ: f64 = 10.0;
-/// Default 1-σ magnetometer white noise per axis and sample, T (a MEMS magnetometer, ~0.1 µT).
-pub const DEFAULT_MAG_SIGMA_T: f64 = 1.0e-7;
-/// Default 1-σ of the constant hard-iron residual per axis, T (0.5 µT: about 1 % of the field,
-/// what is left after a good calibration).
-pub const DEFAULT_MAG_BIAS_SIGMA_T: f64 = 5.0e-7;
-/// Default 1-σ barometer white noise per sample, Pa (MS5611-class, highest oversampling).
-pub const DEFAULT_BARO_SIGMA_PA: f64 = 1.0;
-/// ISA sea-level pressure, Pa.
-pub const ISA_SEA_LEVEL_PA: f64 = 101_325.0;
-
 /// A scenario file could not be read: what is wrong and where.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("line {line}, column {column}: {message}")]
@@ -158,30 +153,49 @@ impl Default for OriginSpec {
     }
 }
 
-/// The commanded flight: initial state plus turns, climbs and speed changes, each smoothly ramped.
+/// Which kinematics fly the trajectory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TrajectoryKind {
+    /// A fixed wing: nose first, coordinated turns ([`crate::trajectory`]).
+    #[default]
+    FixedWing,
+    /// A multirotor: NED velocity and yaw commanded apart, tilt from the acceleration
+    /// ([`crate::multirotor`]). It starts hovering.
+    Multirotor,
+}
+
+/// The commanded flight: initial state plus turns, climbs and speed changes (fixed wing) or
+/// velocity changes and yaw turns (multirotor), each smoothly ramped. Keys of the other kind are
+/// refused, so a file never holds a command that is silently ignored.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+#[serde(try_from = "TrajectoryRaw")]
 pub struct TrajectorySpec {
-    /// Initial ground speed, m/s.
-    #[serde(deserialize_with = "positive")]
+    /// The kinematics (`kind = "fixed-wing"`, the default, or `"multirotor"`).
+    pub kind: TrajectoryKind,
+    /// Initial ground speed, m/s (fixed wing).
     pub speed_mps: f64,
-    /// Initial heading (course over ground, clockwise from north), degrees.
+    /// Initial heading (course over ground for a fixed wing, yaw for a multirotor, clockwise from
+    /// north), degrees.
     pub heading_deg: f64,
-    /// Initial flight-path angle (positive climbing), degrees.
+    /// Initial flight-path angle (positive climbing), degrees (fixed wing).
     pub flight_path_deg: f64,
-    /// Angle of attack: pitch = flight-path angle + this, degrees.
+    /// Angle of attack: pitch = flight-path angle + this, degrees (fixed wing).
     pub alpha_deg: f64,
-    /// Coordinated turns (yaw-rate pulses).
+    /// Yaw-rate pulses: coordinated turns for a fixed wing, yaw without bank for a multirotor.
     pub turns: Vec<TurnSpec>,
-    /// Climbs and descents (flight-path-angle pulses).
+    /// Climbs and descents (flight-path-angle pulses; fixed wing).
     pub climbs: Vec<ClimbSpec>,
-    /// Speed changes (steps).
+    /// Speed changes (steps; fixed wing).
     pub speed_changes: Vec<SpeedChangeSpec>,
+    /// Velocity changes (steps of the NED velocity; multirotor).
+    pub velocity_changes: Vec<VelocityChangeSpec>,
 }
 
 impl Default for TrajectorySpec {
     fn default() -> Self {
         Self {
+            kind: TrajectoryKind::FixedWing,
             speed_mps: DEFAULT_SPEED_MPS,
             heading_deg: 0.0,
             flight_path_deg: 0.0,
@@ -189,8 +203,91 @@ impl Default for TrajectorySpec {
             turns: Vec::new(),
             climbs: Vec::new(),
             speed_changes: Vec::new(),
+            velocity_changes: Vec::new(),
         }
     }
+}
+
+/// A number > 0 that keeps its own line in errors inside an optional key.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(transparent)]
+struct Positive(#[serde(deserialize_with = "positive")] f64);
+
+/// The trajectory table as written: which keys are present matters (see [`TrajectorySpec`]).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TrajectoryRaw {
+    #[serde(default)]
+    kind: TrajectoryKind,
+    speed_mps: Option<Positive>,
+    heading_deg: Option<f64>,
+    flight_path_deg: Option<f64>,
+    alpha_deg: Option<f64>,
+    #[serde(default)]
+    turns: Vec<TurnSpec>,
+    climbs: Option<Vec<ClimbSpec>>,
+    speed_changes: Option<Vec<SpeedChangeSpec>>,
+    velocity_changes: Option<Vec<VelocityChangeSpec>>,
+}
+
+impl TryFrom<TrajectoryRaw> for TrajectorySpec {
+    type Error = String;
+    fn try_from(r: TrajectoryRaw) -> Result<Self, String> {
+        let fixed_wing_keys = [
+            ("speed_mps", r.speed_mps.is_some()),
+            ("flight_path_deg", r.flight_path_deg.is_some()),
+            ("alpha_deg", r.alpha_deg.is_some()),
+            ("climbs", r.climbs.is_some()),
+            ("speed_changes", r.speed_changes.is_some()),
+        ];
+        match r.kind {
+            TrajectoryKind::Multirotor => {
+                if let Some((key, _)) = fixed_wing_keys.iter().find(|(_, given)| *given) {
+                    return Err(format!(
+                        "`{key}` is a fixed-wing key; a multirotor trajectory takes heading_deg, \
+                         turns and velocity_changes"
+                    ));
+                }
+            }
+            TrajectoryKind::FixedWing => {
+                if r.velocity_changes.is_some() {
+                    return Err(
+                        "`velocity_changes` needs kind = \"multirotor\" (a fixed wing takes \
+                         speed_changes, climbs and turns)"
+                            .into(),
+                    );
+                }
+            }
+        }
+        let d = TrajectorySpec::default();
+        Ok(Self {
+            kind: r.kind,
+            speed_mps: r.speed_mps.map_or(d.speed_mps, |p| p.0),
+            heading_deg: r.heading_deg.unwrap_or(d.heading_deg),
+            flight_path_deg: r.flight_path_deg.unwrap_or(d.flight_path_deg),
+            alpha_deg: r.alpha_deg.unwrap_or(d.alpha_deg),
+            turns: r.turns,
+            climbs: r.climbs.unwrap_or_default(),
+            speed_changes: r.speed_changes.unwrap_or_default(),
+            velocity_changes: r.velocity_changes.unwrap_or_default(),
+        })
+    }
+}
+
+/// A multirotor velocity change: the NED velocity moves smoothly to `to_ned_mps` over `ramp_s`.
+/// Changes apply in start order, each from the velocity the previous one commanded.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VelocityChangeSpec {
+    /// Start, s after `t0_ns`.
+    #[serde(deserialize_with = "non_negative")]
+    pub start_s: f64,
+    /// Ramp time, s.
+    #[serde(deserialize_with = "positive")]
+    pub ramp_s: f64,
+    /// Velocity after the ramp, north, east, down, m/s.
+    #[serde(deserialize_with = "finite3")]
+    pub to_ned_mps: [f64; 3],
 }
 
 /// A turn: the yaw rate rises smoothly to `rate_dps` over `ramp_s`, holds, and falls back to zero
@@ -512,114 +609,6 @@ impl Default for CameraSpec {
     }
 }
 
-/// Magnetometer: `m = R_bmᵀ (scale · C_nbᵀ B_ned + d_b) + b + n` (the crate doc's physics contract).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct MagSpec {
-    /// Sample rate, Hz (sample times are snapped to the IMU grid).
-    #[serde(deserialize_with = "positive")]
-    pub rate_hz: f64,
-    /// 1-σ white noise per axis and sample, T.
-    #[serde(deserialize_with = "non_negative")]
-    pub sigma_t: f64,
-    /// 1-σ per axis of the constant hard-iron residual `b`, drawn once per flight, T.
-    #[serde(deserialize_with = "non_negative")]
-    pub bias_sigma_t: f64,
-    /// Calibration scale error: the sensor reads `scale` × the true field (real compasses read
-    /// 0.6–0.8 of the model strength after a calibration that normalises the field).
-    #[serde(deserialize_with = "positive")]
-    pub scale: f64,
-    /// Mount rotation `body_from_mag` as ZYX Euler angles [roll, pitch, yaw], degrees.
-    pub body_from_mag_rpy_deg: [f64; 3],
-    /// Disturbed-field windows (motor currents, a steel structure below): a field added in the
-    /// body axes, as read (after `scale`).
-    pub disturbances: Vec<MagDisturbanceSpec>,
-}
-
-impl Default for MagSpec {
-    fn default() -> Self {
-        Self {
-            rate_hz: DEFAULT_MAG_BARO_RATE_HZ,
-            sigma_t: DEFAULT_MAG_SIGMA_T,
-            bias_sigma_t: DEFAULT_MAG_BIAS_SIGMA_T,
-            scale: 1.0,
-            body_from_mag_rpy_deg: [0.0; 3],
-            disturbances: Vec::new(),
-        }
-    }
-}
-
-/// A disturbed magnetic field: `field_body_t` is added to the reading in `[start_s, end_s)`.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields, try_from = "DisturbanceRaw")]
-pub struct MagDisturbanceSpec {
-    /// When, s after `t0_ns`.
-    pub window: WindowSpec,
-    /// The added field, body axes (x fwd, y right, z down), T.
-    pub field_body_t: [f64; 3],
-}
-
-#[derive(Debug, Clone, Copy, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct DisturbanceRaw {
-    start_s: f64,
-    end_s: f64,
-    field_body_t: [f64; 3],
-}
-
-impl TryFrom<DisturbanceRaw> for MagDisturbanceSpec {
-    type Error = String;
-    fn try_from(r: DisturbanceRaw) -> Result<Self, String> {
-        let window = WindowSpec::try_from(WindowRaw {
-            start_s: r.start_s,
-            end_s: r.end_s,
-        })?;
-        if !r.field_body_t.iter().all(|x| x.is_finite()) {
-            return Err("field_body_t must be finite".into());
-        }
-        Ok(Self {
-            window,
-            field_body_t: r.field_body_t,
-        })
-    }
-}
-
-/// Barometer: static pressure of the ISA troposphere at the true height above mean sea level,
-/// on a day whose sea-level pressure is `sea_level_pa`, plus an offset that drifts (weather) and
-/// walks, plus white noise (the crate doc's physics contract).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct BaroSpec {
-    /// Sample rate, Hz (sample times are snapped to the IMU grid).
-    #[serde(deserialize_with = "positive")]
-    pub rate_hz: f64,
-    /// 1-σ white noise per sample, Pa.
-    #[serde(deserialize_with = "non_negative")]
-    pub sigma_pressure_pa: f64,
-    /// Sea-level pressure of the day, Pa (the ISA's 101 325 Pa by default): a constant offset of
-    /// the pressure height, which only a reference (GNSS) can remove.
-    #[serde(deserialize_with = "positive")]
-    pub sea_level_pa: f64,
-    /// Linear pressure drift (weather), Pa/s; e.g. −0.03 Pa/s ≈ −1 hPa an hour, a falling glass.
-    #[serde(deserialize_with = "finite")]
-    pub drift_pa_per_s: f64,
-    /// Random-walk pressure offset, Pa/√s (sensor warming, wash); 0 = none.
-    #[serde(deserialize_with = "non_negative")]
-    pub random_walk_pa_per_sqrt_s: f64,
-}
-
-impl Default for BaroSpec {
-    fn default() -> Self {
-        Self {
-            rate_hz: DEFAULT_MAG_BARO_RATE_HZ,
-            sigma_pressure_pa: DEFAULT_BARO_SIGMA_PA,
-            sea_level_pa: ISA_SEA_LEVEL_PA,
-            drift_pa_per_s: 0.0,
-            random_walk_pa_per_sqrt_s: 0.0,
-        }
-    }
-}
-
 /// The ground: a textured surface at a fixed height above the WGS84 ellipsoid.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -660,6 +649,16 @@ fn finite<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
     }
 }
 
+/// A finite 3-vector: rejected at its own line otherwise.
+fn finite3<'de, D: Deserializer<'de>>(d: D) -> Result<[f64; 3], D::Error> {
+    let v = <[f64; 3]>::deserialize(d)?;
+    if v.iter().all(|x| x.is_finite()) {
+        Ok(v)
+    } else {
+        Err(D::Error::custom(format!("must be finite, got {v:?}")))
+    }
+}
+
 /// A finite number > 0 (rates, durations): rejected at its own line otherwise.
 fn positive<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
     let v = f64::deserialize(d)?;
@@ -691,6 +690,30 @@ mod tests {
         assert_eq!(s.seed, 3);
         assert_eq!(s.t0_ns, DEFAULT_T0_NS);
         assert_eq!(s.imu, ImuSpec::default());
+    }
+
+    #[test]
+    fn trajectory_keys_of_the_other_kind_are_refused() {
+        let e = Scenario::from_toml_str(
+            "seed = 1\nduration_s = 1\n[trajectory]\nkind = \"multirotor\"\nspeed_mps = 3\n",
+        )
+        .unwrap_err();
+        assert!(e.message.contains("speed_mps"), "{e}");
+        let e = Scenario::from_toml_str(
+            "seed = 1\nduration_s = 1\n[trajectory]\nvelocity_changes = []\n",
+        )
+        .unwrap_err();
+        assert!(e.message.contains("multirotor"), "{e}");
+        let e = Scenario::from_toml_str("seed = 1\nduration_s = 1\n[trajectory]\nspeed_mps = -3\n")
+            .unwrap_err();
+        assert_eq!(e.line, 4, "{e}");
+        let s = Scenario::from_toml_str(
+            "seed = 1\nduration_s = 1\n[trajectory]\nkind = \"multirotor\"\nheading_deg = 30\n",
+        )
+        .unwrap();
+        assert_eq!(s.trajectory.kind, TrajectoryKind::Multirotor);
+        assert_eq!(s.trajectory.heading_deg, 30.0);
+        assert_eq!(s.trajectory.speed_mps, DEFAULT_SPEED_MPS);
     }
 
     #[test]

@@ -15,7 +15,7 @@
 
 use nalgebra::{UnitQuaternion, Vector3};
 
-use crate::scenario::TrajectorySpec;
+use crate::scenario::{TrajectoryKind, TrajectorySpec};
 
 /// Standard gravity used only to shape the coordinated-turn bank, m/s².
 pub const BANK_DESIGN_G_MPS2: f64 = 9.806_65;
@@ -32,6 +32,14 @@ fn smoothstep_d(u: f64) -> f64 {
         return 0.0;
     }
     140.0 * (u * (1.0 - u)).powi(3)
+}
+
+/// d²s/du² = 420 u² (1 − u)² (1 − 2u).
+fn smoothstep_dd(u: f64) -> f64 {
+    if !(0.0..=1.0).contains(&u) {
+        return 0.0;
+    }
+    420.0 * (u * (1.0 - u)).powi(2) * (1.0 - 2.0 * u)
 }
 
 /// ∫₀ᵘ s, for u in [0, 1]; equals 1/2 at u = 1.
@@ -94,6 +102,14 @@ impl Profile {
         self.steps
             .iter()
             .map(|s| s.delta / s.ramp_s * smoothstep_d((t_s - s.t0_s) / s.ramp_s))
+            .sum()
+    }
+
+    /// Second time derivative at `t_s`.
+    pub fn rate_rate(&self, t_s: f64) -> f64 {
+        self.steps
+            .iter()
+            .map(|s| s.delta / (s.ramp_s * s.ramp_s) * smoothstep_dd((t_s - s.t0_s) / s.ramp_s))
             .sum()
     }
 
@@ -257,6 +273,52 @@ impl Trajectory {
     }
 }
 
+/// The flight's kinematics, of the kind its scenario asks for.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FlightPath {
+    /// A fixed wing.
+    FixedWing(Trajectory),
+    /// A multirotor.
+    Multirotor(crate::multirotor::MultirotorTrajectory),
+}
+
+impl FlightPath {
+    /// The kinematics `spec.kind` names.
+    pub fn new(spec: &TrajectorySpec) -> Self {
+        match spec.kind {
+            TrajectoryKind::FixedWing => FlightPath::FixedWing(Trajectory::new(spec)),
+            TrajectoryKind::Multirotor => {
+                FlightPath::Multirotor(crate::multirotor::MultirotorTrajectory::new(spec))
+            }
+        }
+    }
+
+    /// Full kinematic state at `t_s` (seconds after the start).
+    pub fn kinematics(&self, t_s: f64) -> Kinematics {
+        match self {
+            FlightPath::FixedWing(t) => t.kinematics(t_s),
+            FlightPath::Multirotor(m) => m.kinematics(t_s),
+        }
+    }
+
+    /// Positions at `times_s` (increasing, first = 0 at the origin).
+    pub fn positions(&self, times_s: &[f64]) -> Vec<Vector3<f64>> {
+        match self {
+            FlightPath::FixedWing(t) => t.positions(times_s),
+            FlightPath::Multirotor(m) => m.positions(times_s),
+        }
+    }
+
+    /// The attitude angle that limits the vehicle, rad: bank for a fixed wing, tilt from the
+    /// vertical for a multirotor.
+    pub fn limiting_angle_rad(&self, kin: &Kinematics) -> f64 {
+        match self {
+            FlightPath::FixedWing(_) => kin.euler_rad.x.abs(),
+            FlightPath::Multirotor(_) => crate::multirotor::MultirotorTrajectory::tilt_rad(kin),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -299,6 +361,8 @@ mod tests {
         );
         let d = (p.value(2.0 + 1e-6) - p.value(2.0 - 1e-6)) / 2e-6;
         assert!((d - p.rate(2.0)).abs() < 1e-6);
+        let dd = (p.rate(2.3 + 1e-6) - p.rate(2.3 - 1e-6)) / 2e-6;
+        assert!((dd - p.rate_rate(2.3)).abs() < 1e-6, "{dd}");
     }
 
     #[test]

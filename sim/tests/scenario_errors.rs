@@ -20,6 +20,7 @@ fn shipped_scenarios_parse_and_fly() {
         include_str!("../../scenarios/paper-small-lever.toml"),
         include_str!("../../scenarios/paper-big-lever.toml"),
         include_str!("../../scenarios/mag-baro.toml"),
+        include_str!("../../scenarios/multirotor.toml"),
     ] {
         let s = Scenario::from_toml_str(text).unwrap();
         Flight::new(&s).unwrap();
