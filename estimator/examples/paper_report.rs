@@ -5,6 +5,7 @@
 //! `CARGO_TARGET_DIR=/work/target-estimator cargo run --release -p uavnav-estimator --example paper_report [scenario…]`
 //! (`ORACLE_ROT_DEG`, `ORACLE_DIR_DEG`, `ORACLE_METRIC_REL` change the oracle's noise).
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
+#![allow(clippy::disallowed_methods)] // a timing tool: it measures wall time on purpose
 
 #[path = "../tests/common/mod.rs"]
 mod common;

@@ -28,6 +28,7 @@
 //! The runner's wall and CPU time cover `push_inline` only (estimator + vision on this one thread);
 //! the simulator renders frames on its own rayon pool between pushes, outside that time.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // examples may unwrap
+#![allow(clippy::disallowed_methods)] // a timing tool: it measures wall time on purpose
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;

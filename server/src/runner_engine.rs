@@ -106,7 +106,7 @@ impl Engine for RunnerEngine {
     fn health(&self) -> EngineHealth {
         let h = self.runner.health();
         let v = self.runner.vision_stats();
-        let vision = (v.frames > 0).then(|| pb::VisionQuality {
+        let vision = (v.frames > 0).then_some(pb::VisionQuality {
             tracked: v.last_tracked,
             inliers: v.last_inliers,
             quality: v.last_quality,

@@ -300,6 +300,9 @@ async fn decode_loop(
     }
 }
 
+// One decoded message on its way to the ingestor: boxing the larger variants would allocate per
+// IMU message for nothing.
+#[allow(clippy::large_enum_variant)]
 enum In {
     Imu(pb::ImuBatch),
     Gnss(pb::GnssFix),

@@ -2,6 +2,7 @@
 //!
 //! `cargo run --release -p uavnav-sim --example render_all -- [SCENARIO.toml] [--save DIR N]`
 //! (`--save` also writes every N-th frame into DIR as JPEG and PNG, to look at them).
+#![allow(clippy::disallowed_methods)] // a timing tool: it measures wall time on purpose
 
 use std::time::Instant;
 

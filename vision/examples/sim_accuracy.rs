@@ -7,6 +7,7 @@
 //! (default `/tmp/uavnav-vision-frames`), so repeated runs only time the front end. The prior is
 //! the one of `tests/sim_flight.rs`: gyro integrated from the noisy IMU, ground normal and height
 //! from a slightly wrong attitude and altitude, velocity with noise.
+#![allow(clippy::disallowed_methods)] // a timing tool: it measures wall time on purpose
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;

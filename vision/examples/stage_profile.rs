@@ -7,6 +7,7 @@
 //! frame (from `/proc/thread-self/schedstat`, Linux; less sensitive to other load on the machine
 //! than the wall clock). Under `valgrind --tool=callgrind` with few frames it gives instruction
 //! counts per function.
+#![allow(clippy::disallowed_methods)] // a timing tool: it measures wall time on purpose
 
 #[path = "../benches/common/mod.rs"]
 mod common;
