@@ -91,7 +91,7 @@ pub async fn configure(
 ) -> Result<bool, ClientError> {
     let req = pb::ConfigureVehicleRequest {
         vehicle_id: id.to_string(),
-        config: Some(config.clone()),
+        config: Some(*config),
     };
     let resp = c
         .clone()

@@ -25,6 +25,9 @@ use crate::pb::sensor_envelope::Payload;
 use crate::schedule::{TimedMessage, shift_payload};
 use crate::watch::Selector;
 
+/// What one sender task returns: its latency histogram, (vehicle, last t_ns) pairs, messages sent.
+type SenderResult = (Histogram<u64>, Vec<(usize, i64)>, u64);
+
 /// One vehicle's recorded stream, looped when the run is longer than the recording.
 #[derive(Debug)]
 pub struct Recording {
@@ -393,7 +396,7 @@ pub async fn run(
     }
     let start = Instant::now() + Duration::from_millis(50);
     let duration_ns = params.duration.as_nanos() as i64;
-    let mut senders: Vec<JoinHandle<(Histogram<u64>, Vec<(usize, i64)>, u64)>> = Vec::new();
+    let mut senders: Vec<JoinHandle<SenderResult>> = Vec::new();
     for (s, ing) in ingests.iter().enumerate() {
         let vehicles: Vec<usize> = (s..params.vehicles).step_by(streams).collect();
         senders.push(tokio::spawn(send_loop(
@@ -503,7 +506,7 @@ pub async fn run(
         service: service_counters(&latest_health, &params.baseline),
         final_counters: latest_health
             .iter()
-            .filter_map(|(id, h)| Some((id.clone(), h.counters.clone()?)))
+            .filter_map(|(id, h)| Some((id.clone(), h.counters?)))
             .collect(),
         expects_poses,
         params: params.clone(),

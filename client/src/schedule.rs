@@ -114,7 +114,7 @@ pub fn build<I: IntoIterator<Item = SensorEvent>>(
             TimedMessage {
                 offset_ns: 0,
                 last_t_ns: t0,
-                payload: Payload::Config(c.clone()),
+                payload: Payload::Config(*c),
             },
         );
     }

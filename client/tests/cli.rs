@@ -1,5 +1,6 @@
 //! The online `uavnav` subcommands end to end against an in-process `uavnavd`: management,
 //! replay, watch (CSV, TUM, Foxglove live view).
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod common;
 

@@ -1,4 +1,5 @@
 //! The client library against an in-process `uavnavd`: the same API over gRPC and Zenoh.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod common;
 

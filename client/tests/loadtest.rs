@@ -1,4 +1,5 @@
 //! `uavnav loadtest` and the load generator, against the service and the discarding sink.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod common;
 

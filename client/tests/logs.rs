@@ -3,6 +3,7 @@
 //! real log end to end with a report scored against the autopilot's estimate (named as a
 //! reference, never truth), and a cut log refused with its byte offset and exit code 2.
 //! Skips with a message when `../shared/data` is absent.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

@@ -1,4 +1,5 @@
 //! `uavnav record` then `uavnav replay`: a recording reproduces the poses.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod common;
 

@@ -3,6 +3,7 @@
 //! reference (never truth), and give the same events as the shared ASL conversions (GNSS stamps
 //! apart: the shared ASL is stamped T − 220 ms, a log's fixes stay as logged with the delay in the
 //! configuration). Skips with a message when `../shared/data` is absent.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use std::path::PathBuf;
 

@@ -4,6 +4,7 @@
 //! skips with a message when the shared data is absent.
 //!
 //! Run with `--nocapture` to see the figures.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod real;
 

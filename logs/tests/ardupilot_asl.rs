@@ -20,6 +20,7 @@
 //!   difference (every stamp shares the one offset, so the comparison is exact otherwise).
 //! * plane_E ends inside a message (the logger stopped mid-write), so it is imported with
 //!   `stop_at_damage` and a note says where it stopped.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use uavnav_logs::{FlightLog, ImportOptions, LogKind, TimeBase, VehicleKind};
 

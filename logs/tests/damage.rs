@@ -1,6 +1,7 @@
 //! Truncated and corrupted logs: a clear error naming the byte offset, never a panic. Small
 //! synthetic logs of both formats are cut at every offset and corrupted at random (proptest); the
 //! shared real logs, when present, are cut at a few hundred offsets too.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use proptest::prelude::*;
 use uavnav_logs::{ImportOptions, LogError, import};

@@ -1,5 +1,6 @@
 //! PX4 ULog import of the shared public logs, with the message counts their README gives
 //! (pyulog 1.3.0, `px4-ulog` 0.6.1 and `yule_log` 0.4.0 agree on them).
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use uavnav_logs::{ImportOptions, LogKind};
 

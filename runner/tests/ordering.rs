@@ -1,5 +1,6 @@
 //! The ordering rule: a runner whose vision jobs come back late (as on the service's worker pool)
 //! produces exactly the poses of a runner that runs vision inline.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use std::collections::VecDeque;
 

@@ -3,6 +3,7 @@
 //! about 6 (its dimension). The estimator's `vision_cov_scale` (the allowance for the errors' time
 //! correlation) assumes exactly this; a front-end or solver change that makes the covariance
 //! optimistic or pessimistic again fails here.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use nalgebra::{UnitQuaternion, Vector3, Vector6};
 use uavnav_core::{SensorEvent, TruthSample};

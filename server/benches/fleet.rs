@@ -8,6 +8,7 @@
 //! poses, the generator kept its schedule (p99 send lag < 50 ms) and p99 ingest-to-pose latency is
 //! ≤ 50 ms. Latency is the service's: from the envelope's arrival (`PoseEstimate.ingest_wall_ns`)
 //! to the pose reaching the output hub. RSS is sampled every second.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};

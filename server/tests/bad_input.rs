@@ -1,4 +1,5 @@
 //! Every bad-input case gets its exact status, and never disturbs another vehicle.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod common;
 

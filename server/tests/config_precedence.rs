@@ -1,4 +1,5 @@
 //! Configuration: defaults < file < environment < flags; unknown keys are named.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use std::collections::HashMap;
 use std::io::Write;

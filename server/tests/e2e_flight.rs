@@ -1,6 +1,7 @@
 //! End to end: a simulated flight streamed into the service over gRPC, and over Zenoh, gives
 //! exactly the poses of the offline runner (`push_inline`, what `uavnav estimate` does) on the same
 //! data: the actor's ordering, the vision pool and the transports change nothing.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod common;
 

@@ -1,5 +1,6 @@
 //! Many vehicles at once over gRPC: each gets exactly its own poses; listing, watching with a
 //! prefix and decimation, GetPose, configure and reset.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod common;
 

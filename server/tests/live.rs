@@ -1,6 +1,7 @@
 //! The Foxglove live view of the service (`uavnavd --foxglove-addr`), seen by a Foxglove WebSocket
 //! client speaking the `foxglove.sdk.v1` protocol: each vehicle's pose, path, map fix, GNSS fix and
 //! camera image arrive on their topics with the values that were ingested.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod common;
 

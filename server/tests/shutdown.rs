@@ -1,5 +1,6 @@
 //! Graceful shutdown drains: everything accepted before the stop is fused and published, each
 //! vehicle publishes a final health report, watch streams end, the ports close.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod common;
 

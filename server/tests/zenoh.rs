@@ -2,6 +2,7 @@
 //! Zenoh (pose, health, `pose/latest`, `vehicles`, liveliness) and over gRPC; bad payloads are
 //! counted. Sessions use explicit loopback endpoints and no multicast scouting, so parallel tests
 //! never see each other.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod common;
 

@@ -8,7 +8,6 @@
 //!
 //! `nice -n 10 cargo bench -p uavnav-vision --bench frame`
 #![allow(clippy::disallowed_methods)] // a timing tool: it measures wall time on purpose
-
 #![allow(clippy::unwrap_used)]
 
 mod common;
