@@ -39,8 +39,8 @@ async fn main() -> anyhow::Result<()> {
             },
             _ = tick.tick() => {
                 for (id, (p, h)) in &latest {
-                    let pos = p.as_ref().and_then(|p| p.position.clone()).unwrap_or_default();
-                    let late = h.as_ref().and_then(|h| h.counters.clone()).map_or(0, |c| c.late);
+                    let pos = p.as_ref().and_then(|p| p.position).unwrap_or_default();
+                    let late = h.as_ref().and_then(|h| h.counters).map_or(0, |c| c.late);
                     println!("{id:<16} lat {:>12.7} lon {:>12.7} alt {:>8.1} m  late {late}", pos.latitude_deg, pos.longitude_deg, pos.altitude_m);
                 }
             }

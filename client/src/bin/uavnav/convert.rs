@@ -68,7 +68,8 @@ pub fn run(args: Args) -> CliResult {
     Ok(())
 }
 
-/// Where `simulate` writes: an ASL folder or an MCAP recording.
+/// Where `simulate` writes: an ASL folder or an MCAP recording (one per run).
+#[allow(clippy::large_enum_variant)]
 pub enum Sink {
     /// ASL folder.
     Asl(AslWriter),

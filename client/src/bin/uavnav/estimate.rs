@@ -174,7 +174,7 @@ pub fn run(args: Args) -> CliResult {
         .with_context(|| format!("cannot create {}", args.out.display()))
         .map_err(CliError::runtime)?;
     let mut csv = std::io::BufWriter::new(file);
-    writeln!(csv, "{}", csv_header()).map_err(|e| CliError::runtime(e))?;
+    writeln!(csv, "{}", csv_header()).map_err(CliError::runtime)?;
     let mut tum = match &args.tum {
         Some(p) => Some(std::io::BufWriter::new(
             std::fs::File::create(p)

@@ -59,9 +59,9 @@ fn header() -> String {
 }
 
 fn line(h: &pb::VehicleHealth, json: bool) -> String {
-    let r = h.input_rates.clone().unwrap_or_default();
-    let l = h.latency.clone().unwrap_or_default();
-    let c = h.counters.clone().unwrap_or_default();
+    let r = h.input_rates.unwrap_or_default();
+    let l = h.latency.unwrap_or_default();
+    let c = h.counters.unwrap_or_default();
     if json {
         return serde_json::json!({
             "vehicle_id": h.vehicle_id, "mode": mode_name(h.mode), "t_ns": h.t_ns, "wall_ns": h.wall_ns,

@@ -67,15 +67,14 @@ impl McapSink {
 
     /// Records a pose (log time = now).
     pub fn pose(&mut self, p: &pb::PoseEstimate) -> Result<(), CliError> {
-        if !self.frames.contains_key(&p.vehicle_id) {
-            if let Some(lla) = p
+        if !self.frames.contains_key(&p.vehicle_id)
+            && let Some(lla) = p
                 .position
                 .as_ref()
                 .and_then(|g| uavnav_core::Lla::try_from(g).ok())
-            {
-                self.frames
-                    .insert(p.vehicle_id.clone(), LocalFrame::new(lla));
-            }
+        {
+            self.frames
+                .insert(p.vehicle_id.clone(), LocalFrame::new(lla));
         }
         let frame = self.frames.get(&p.vehicle_id);
         self.writer

@@ -154,11 +154,7 @@ pub fn run(args: Args) -> CliResult {
                 uavnav_client::error::check_vehicle_id(&id).map_err(CliError::input)?;
                 let offset = Duration::from_secs_f64(args.stagger.max(0.0) * k_global as f64);
                 k_global += 1;
-                let config = if args.no_config {
-                    None
-                } else {
-                    s.config.clone()
-                };
+                let config = if args.no_config { None } else { s.config };
                 tasks.push(tokio::spawn(copy(
                     ingest.sender(),
                     id,

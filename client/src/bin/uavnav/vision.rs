@@ -46,8 +46,10 @@ pub fn run(args: Args) -> CliResult {
             args.dataset.display()
         )));
     };
-    let mut params = VisionParams::default();
-    params.imu_aid = !args.no_imu_aid;
+    let mut params = VisionParams {
+        imu_aid: !args.no_imu_aid,
+        ..VisionParams::default()
+    };
     params.solve.method = args.method;
     let mut frontend = FrontEnd::new(&camera.model, camera.body_from_cam, params);
     let epoch = std::time::Instant::now();
@@ -82,12 +84,11 @@ pub fn run(args: Args) -> CliResult {
                 writeln!(out, "{}", csv_row(&r)).map_err(CliError::runtime)?;
                 if let Ok(ego) = &r.outcome {
                     measured += 1;
-                    if let Some(truth) = &truth {
-                        if let Some((rt, tt)) =
+                    if let Some(truth) = &truth
+                        && let Some((rt, tt)) =
                             true_motion(truth, &camera.body_from_cam, t0, r.t1_ns)
-                        {
-                            errors.push(pair_error(ego, &rt, &tt));
-                        }
+                    {
+                        errors.push(pair_error(ego, &rt, &tt));
                     }
                 }
             }

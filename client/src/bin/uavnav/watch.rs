@@ -67,7 +67,8 @@ pub struct Args {
     pub foxglove: Option<String>,
 }
 
-/// Where poses go.
+/// Where poses go (one per command run: the size difference of the variants does not matter).
+#[allow(clippy::large_enum_variant)]
 enum Out {
     /// Poses go to the live view only.
     Nowhere,
@@ -141,7 +142,7 @@ impl Out {
         match self {
             Out::Mcap(m) => m.health(h),
             _ => {
-                let c = h.counters.clone().unwrap_or_default();
+                let c = h.counters.unwrap_or_default();
                 eprintln!(
                     "health {} mode={} accepted={} rejected={} late={} shed={} dropped={}",
                     h.vehicle_id,
