@@ -506,6 +506,7 @@ impl Eskf {
                 self.yaw_aligned = true;
                 self.heading = HeadingSource::YawEstimator;
                 self.corrected = true;
+                self.forget_horizontal_accel_bias();
             } else if self.course_heading
                 && let Some(v) = m.vel_ned_mps
                 && v.xy().norm() >= self.params.init_min_speed_mps
@@ -544,6 +545,23 @@ impl Eskf {
                 self.yaw_resets += 1;
                 self.corrected = true;
             }
+        }
+    }
+
+    /// After a heading alignment late in a flight: what the filter learnt of the horizontal
+    /// accelerometer bias under an unknown heading is not to be trusted (velocity errors from the
+    /// wrong heading went partly into it); back to its initial σ, uncorrelated.
+    fn forget_horizontal_accel_bias(&mut self) {
+        let s2 = self.params.init_accel_bias_sigma_mps2.powi(2);
+        for k in 0..2 {
+            let i = crate::state::IBA + k;
+            self.p.row_mut(i).fill(0.0);
+            self.p.column_mut(i).fill(0.0);
+            self.p[(i, i)] = s2;
+        }
+        if let Some(x) = self.x.as_mut() {
+            x.ba.x = 0.0;
+            x.ba.y = 0.0;
         }
     }
 
