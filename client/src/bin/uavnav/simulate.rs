@@ -40,7 +40,11 @@ pub fn run(args: Args) -> CliResult {
     let scenario = load_scenario(&args.scenario)?;
     let flight = Flight::new(&scenario)
         .map_err(|e| CliError::input(anyhow::anyhow!("{}: {e}", args.scenario.display())))?;
-    let total = (flight.imu().len() + flight.gnss().len() + flight.camera_times_ns().len()) as u64;
+    let total = (flight.imu().len()
+        + flight.gnss().len()
+        + flight.mag().len()
+        + flight.baro().len()
+        + flight.camera_times_ns().len()) as u64;
     let bar = progress(total, "simulate");
     if args.quiet {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
