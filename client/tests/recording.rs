@@ -84,7 +84,7 @@ async fn record_then_replay_reproduces_the_poses() {
     let mut poses_b: Vec<(i64, f64, f64, f64)> = got
         .iter()
         .map(|p| {
-            let g = p.position.clone().unwrap();
+            let g = p.position.unwrap();
             (p.t_ns, g.latitude_deg, g.longitude_deg, g.altitude_m)
         })
         .collect();
