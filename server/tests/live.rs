@@ -95,12 +95,13 @@ async fn live_view_shows_pose_path_gnss_and_camera_of_each_vehicle() {
         acks.iter()
             .all(|a| a.status == uavnav_proto::v1::IngestStatus::Accepted as i32)
     );
-    let topics = advertised(&mut ws, 5).await;
+    let topics = advertised(&mut ws, 6).await;
     for (topic, schema) in [
         ("/vehicle/uav-7/pose", "foxglove.PoseInFrame"),
         ("/vehicle/uav-7/path", "foxglove.PosesInFrame"),
         ("/vehicle/uav-7/estimate_fix", "foxglove.LocationFix"),
         ("/vehicle/uav-7/gnss", "foxglove.LocationFix"),
+        ("/vehicle/uav-7/mag", "foxglove.Vector3"),
         ("/vehicle/uav-7/camera", "foxglove.CompressedImage"),
     ] {
         assert_eq!(topics[topic].1, schema, "{topic}");
