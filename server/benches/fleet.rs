@@ -113,6 +113,22 @@ fn script(events: &[SensorEvent], batch: usize, camera: bool) -> Vec<Item> {
                 });
             }
             SensorEvent::Camera(_) => {}
+            SensorEvent::Mag(m) => {
+                flush(&mut imu, &mut out);
+                out.push(Item {
+                    t_ns: m.t_ns,
+                    payload: P::Mag(m.into()),
+                    imu_samples: 0,
+                });
+            }
+            SensorEvent::Baro(b) => {
+                flush(&mut imu, &mut out);
+                out.push(Item {
+                    t_ns: b.t_ns,
+                    payload: P::Baro(b.into()),
+                    imu_samples: 0,
+                });
+            }
         }
     }
     flush(&mut imu, &mut out);
@@ -173,7 +189,7 @@ async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleCo
     for v in 0..n {
         c.configure_vehicle(pb::ConfigureVehicleRequest {
             vehicle_id: format!("v{v}"),
-            config: Some(config.clone()),
+            config: Some(config),
         })
         .await
         .expect("configure");
@@ -361,7 +377,7 @@ fn main() {
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for &n in &args.vehicles {
-        let r = rt.block_on(run(n, &args, Arc::clone(&items), config.clone()));
+        let r = rt.block_on(run(n, &args, Arc::clone(&items), config));
         println!(
             "| {} | {} | {:.1} | {:.0} | {} | {} | {} | {} | {} | {:.1} | {:.1} / {:.1} / {:.1} | {:.0} → {:.0} | {} |",
             r.vehicles,
