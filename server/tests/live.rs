@@ -130,7 +130,7 @@ async fn live_view_shows_pose_path_gnss_and_camera_of_each_vehicle() {
     let acks = ingest(
         &mut grpc,
         vec![
-            gnss_env("uav-7", 4, moved.clone()),
+            gnss_env("uav-7", 4, moved),
             camera_env("uav-7", 5, t0 + 1_010_000_000, jpeg.clone()),
             imu_env("uav-7", 6, vec![imu(t0 + 1_100_000_000)]),
         ],

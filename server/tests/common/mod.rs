@@ -205,7 +205,6 @@ pub fn fix(t_ns: i64) -> pb::GnssFix {
         sigma_velocity_mps: Some(0.1),
         fix_type: pb::FixType::Fix3d as i32,
         num_satellites: 10,
-        ..Default::default()
     }
 }
 
