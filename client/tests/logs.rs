@@ -5,21 +5,10 @@
 //! Skips with a message when `../shared/data` is absent.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 
 const BIN: &str = env!("CARGO_BIN_EXE_uavnav");
-
-/// `../shared/data/real_flights` beside the workspace (this crate is `<workspace>/client`).
-fn real_flights() -> Option<PathBuf> {
-    let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"));
-    if p.is_dir() {
-        Some(p.join("real_flights"))
-    } else {
-        eprintln!("skipping: {} not found (shared real flights)", p.display());
-        None
-    }
-}
 
 fn run(args: &[&str]) -> Output {
     let out = Command::new(BIN).args(args).output().expect("uavnav runs");
@@ -74,7 +63,7 @@ fn close(folder: &str, col: usize, u: f64, v: f64) -> bool {
 
 #[test]
 fn convert_ardupilot_log_matches_the_shared_asl_folder() {
-    let Some(root) = real_flights() else {
+    let Some(root) = uavnav_tests::shared_data("real_flights") else {
         return;
     };
     let raw = root.join("raw/erle_copter_218.BIN");
@@ -158,7 +147,7 @@ fn convert_ardupilot_log_matches_the_shared_asl_folder() {
 
 #[test]
 fn estimate_a_real_log_with_a_report_against_the_autopilot_reference() {
-    let Some(root) = real_flights() else {
+    let Some(root) = uavnav_tests::shared_data("real_flights") else {
         return;
     };
     let raw = root.join("raw/erle_plane_E.BIN");
@@ -222,7 +211,7 @@ fn estimate_a_real_log_with_a_report_against_the_autopilot_reference() {
 
 #[test]
 fn a_cut_log_is_refused_with_its_byte_offset() {
-    let Some(root) = real_flights() else {
+    let Some(root) = uavnav_tests::shared_data("real_flights") else {
         return;
     };
     let data = std::fs::read(root.join("raw/erle_copter_218.BIN")).expect("log");

@@ -5,21 +5,9 @@
 //! configuration). Skips with a message when `../shared/data` is absent.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-use std::path::PathBuf;
 
 use uavnav_core::SensorEvent;
 use uavnav_dataset::{Dataset, Format, ReadOptions};
-
-/// `../shared/data/real_flights` beside the workspace (this crate is `<workspace>/dataset`).
-fn real_flights() -> Option<PathBuf> {
-    let p = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"));
-    if p.is_dir() {
-        Some(p.join("real_flights"))
-    } else {
-        eprintln!("skipping: {} not found (shared real flights)", p.display());
-        None
-    }
-}
 
 #[derive(Debug, Default, PartialEq, Eq)]
 struct Counts {
@@ -49,7 +37,7 @@ fn events(ds: &Dataset) -> (Counts, Vec<SensorEvent>) {
 
 #[test]
 fn ardupilot_log_is_a_dataset_with_a_reference_not_truth() {
-    let Some(root) = real_flights() else {
+    let Some(root) = uavnav_tests::shared_data("real_flights") else {
         return;
     };
     let raw = root.join("raw/erle_copter_218.BIN");
@@ -129,7 +117,7 @@ fn ardupilot_log_is_a_dataset_with_a_reference_not_truth() {
 
 #[test]
 fn damaged_log_names_the_byte_offset_unless_asked_to_stop_there() {
-    let Some(root) = real_flights() else {
+    let Some(root) = uavnav_tests::shared_data("real_flights") else {
         return;
     };
     // plane_E's logger stopped inside its last message

@@ -29,8 +29,10 @@ use uavnav_core::rotation::from_euler_zyx;
 use uavnav_core::{ImuConfig, ImuSample, Lla, TruthSample, VehicleConfig};
 
 use crate::dataflash::{self, DfLog, Table, Value};
-use crate::{AttitudeSample, FlightLog, ImportOptions, LogError, LogKind, TimeBase, VehicleKind};
-use uavnav_core::{BaroSample, FixType, GnssFix, GnssVelocity, MagSample};
+use crate::{
+    AttitudeSample, FlightLog, ImportOptions, LogError, LogKind, TimeBase, VehicleKind, fix_type,
+};
+use uavnav_core::{BaroSample, GnssFix, GnssVelocity, MagSample};
 
 /// The messages the importer reads; every other type is only counted.
 const KEEP: [&str; 14] = [
@@ -188,17 +190,6 @@ fn nearest(acc: &[(i64, f64, f64, f64)], t_us: i64) -> Option<(f64, f64, f64)> {
         .filter(|a| (a.0 - t_us).abs() <= ACCURACY_WINDOW_US)
         .min_by_key(|a| (a.0 - t_us).abs())
         .map(|a| (a.1, a.2, a.3))
-}
-
-fn fix_type(status: f64) -> FixType {
-    match status as i64 {
-        2 => FixType::Fix2d,
-        3 => FixType::Fix3d,
-        4 => FixType::Dgps,
-        5 => FixType::RtkFloat,
-        s if s >= 6 => FixType::RtkFixed,
-        _ => FixType::None,
-    }
 }
 
 pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, LogError> {

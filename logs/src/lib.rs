@@ -239,3 +239,17 @@ pub(crate) fn median_dt_s(t_ns: impl Iterator<Item = i64>) -> Option<f64> {
     let dts: Vec<f64> = t.windows(2).map(|w| (w[1] - w[0]) as f64 * 1e-9).collect();
     median(&dts).filter(|dt| *dt > 0.0)
 }
+
+/// The fix type from the code both autopilots log (ArduPilot `GPS.Status`, PX4 `fix_type`, the
+/// MAVLink `GPS_FIX_TYPE` numbering): 2 2-D, 3 3-D, 4 DGPS, 5 RTK float, 6 and above RTK fixed.
+pub(crate) fn fix_type(code: f64) -> uavnav_core::FixType {
+    use uavnav_core::FixType;
+    match code as i64 {
+        2 => FixType::Fix2d,
+        3 => FixType::Fix3d,
+        4 => FixType::Dgps,
+        5 => FixType::RtkFloat,
+        s if s >= 6 => FixType::RtkFixed,
+        _ => FixType::None,
+    }
+}

@@ -21,8 +21,8 @@ use uavnav_core::geoid::egm96_undulation_m;
 use uavnav_core::{ImuConfig, ImuSample, Lla, TruthSample, VehicleConfig};
 
 use crate::ulog::{self, Topic};
-use crate::{FlightLog, ImportOptions, LogError, LogKind, TimeBase, VehicleKind};
-use uavnav_core::{BaroSample, FixType, GnssFix, GnssVelocity, MagSample};
+use crate::{FlightLog, ImportOptions, LogError, LogKind, TimeBase, VehicleKind, fix_type};
+use uavnav_core::{BaroSample, GnssFix, GnssVelocity, MagSample};
 
 fn vec3(t: &Topic, r: &[u8], name: &str) -> Option<Vector3<f64>> {
     Some(Vector3::new(
@@ -30,17 +30,6 @@ fn vec3(t: &Topic, r: &[u8], name: &str) -> Option<Vector3<f64>> {
         t.get(r, &format!("{name}[1]"))?,
         t.get(r, &format!("{name}[2]"))?,
     ))
-}
-
-fn fix_type(f: f64) -> FixType {
-    match f as i64 {
-        2 => FixType::Fix2d,
-        3 => FixType::Fix3d,
-        4 => FixType::Dgps,
-        5 => FixType::RtkFloat,
-        s if s >= 6 => FixType::RtkFixed,
-        _ => FixType::None,
-    }
 }
 
 pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, LogError> {

@@ -24,21 +24,6 @@
 
 use uavnav_logs::{FlightLog, ImportOptions, LogKind, TimeBase, VehicleKind};
 
-/// `../shared/data` beside the workspace (this crate is `<workspace>/logs`), when present: a
-/// user's clone has no `../shared`, and the test then skips.
-fn shared_data() -> Option<std::path::PathBuf> {
-    let p = std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"));
-    if p.is_dir() {
-        Some(p)
-    } else {
-        eprintln!(
-            "skipping: {} not found (the shared real-flight and public logs live there)",
-            p.display()
-        );
-        None
-    }
-}
-
 /// Rows of a CSV file as numbers (empty cells NaN); the header line is skipped.
 fn csv(path: &std::path::Path) -> Vec<Vec<f64>> {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
@@ -323,7 +308,7 @@ fn check_flight(root: &std::path::Path, name: &str) {
 
 #[test]
 fn ardupilot_logs_match_shared_asl_conversions() {
-    let Some(root) = shared_data().map(|d| d.join("real_flights")) else {
+    let Some(root) = uavnav_tests::shared_data("real_flights") else {
         return;
     };
     for name in ["erle_copter_218", "erle_copter_103", "erle_plane_E"] {

@@ -162,24 +162,9 @@ proptest! {
     }
 }
 
-/// `../shared/data` beside the workspace (this crate is `<workspace>/logs`), when present: a
-/// user's clone has no `../shared`, and the test then skips.
-fn shared_data() -> Option<std::path::PathBuf> {
-    let p = std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"));
-    if p.is_dir() {
-        Some(p)
-    } else {
-        eprintln!(
-            "skipping: {} not found (the shared real-flight and public logs live there)",
-            p.display()
-        );
-        None
-    }
-}
-
 #[test]
 fn cuts_of_the_shared_logs_are_clear_errors() {
-    let Some(root) = shared_data() else {
+    let Some(root) = uavnav_tests::shared_data("") else {
         return;
     };
     for f in [

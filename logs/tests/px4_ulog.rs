@@ -4,24 +4,9 @@
 
 use uavnav_logs::{ImportOptions, LogKind};
 
-/// `../shared/data` beside the workspace (this crate is `<workspace>/logs`), when present: a
-/// user's clone has no `../shared`, and the test then skips.
-fn shared_data() -> Option<std::path::PathBuf> {
-    let p = std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"));
-    if p.is_dir() {
-        Some(p)
-    } else {
-        eprintln!(
-            "skipping: {} not found (the shared real-flight and public logs live there)",
-            p.display()
-        );
-        None
-    }
-}
-
 #[test]
 fn ulog_counts_match_the_readme() {
-    let Some(root) = shared_data().map(|d| d.join("public_flight_logs")) else {
+    let Some(root) = uavnav_tests::shared_data("public_flight_logs") else {
         return;
     };
     for (file, imu, gps, new_schema) in [

@@ -1,4 +1,7 @@
-//! The workspace's test map (this crate holds no tests of its own yet).
+//! The workspace's test support and test map.
+//!
+//! Support: [`shared_data`] finds the shared real data beside the workspace (or says why a test
+//! skips). Map:
 //!
 //! End-to-end tests sit next to the crate they exercise, so each runs against that crate's public
 //! API and `cargo test --workspace` runs them all:
@@ -13,3 +16,22 @@
 //! - `runner/tests/`, `estimator/tests/`, `vision/tests/`, `dataset/tests/`, `sim/tests/`: the pure
 //!   crates' scenario, property, Jacobian, golden and real-data tests;
 //! - `docker/test.sh`: the compose deployment (run by `.ci/run` when a Docker engine is present).
+
+use std::path::PathBuf;
+
+/// `<workspace>/../shared/data/<sub>`, when present. A user's clone has no `../shared`: the
+/// caller's test then skips, and this says so on stderr with the path it looked for.
+pub fn shared_data(sub: &str) -> Option<PathBuf> {
+    let root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"));
+    let p = root.join(sub);
+    if p.exists() {
+        Some(p)
+    } else {
+        eprintln!(
+            "skipping: {} not found (the shared real data sits beside the repository; a user's \
+             clone has none)",
+            p.display()
+        );
+        None
+    }
+}

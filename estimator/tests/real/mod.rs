@@ -13,21 +13,9 @@ use uavnav_core::{
 };
 use uavnav_estimator::{Estimator, EstimatorParams, PoseOutput};
 
-/// The shared real flights, or `None` (with a message) when `../shared` is absent.
+/// The shared real flight `name`, or `None` (with a message) when `../shared` is absent.
 pub fn flight_dir(name: &str) -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data/real_flights")
-        .join(name);
-    if dir.join("mav0").is_dir() {
-        Some(dir)
-    } else {
-        eprintln!(
-            "skipping: real flight {name} not found at {} (the shared data sits beside the \
-             repository; a user's clone has none)",
-            dir.display()
-        );
-        None
-    }
+    uavnav_tests::shared_data(&format!("real_flights/{name}")).filter(|d| d.join("mav0").is_dir())
 }
 
 fn rows(path: &Path) -> Vec<Vec<Option<f64>>> {
