@@ -47,6 +47,44 @@ pub struct GnssConfig {
     /// processes it: ArduPilot `EK3_GPS_DELAY`, PX4 `EKF2_GPS_DELAY`). 0 when stamps are validity
     /// times.
     pub delay_ns: i64,
+    /// What the fixes' altitude is measured from.
+    pub altitude_reference: AltitudeReference,
+}
+
+/// What a GNSS altitude is measured from. uavnav works in height above the WGS84 ellipsoid;
+/// receivers and autopilots often give height above mean sea level (ArduPilot `GPS.Alt`, NMEA
+/// GGA, MAVLink `GPS_RAW_INT.alt`), which differs by the geoid undulation (+51 m in northern
+/// Spain, −30 m over India): the estimator converts with EGM96 (`crate::geoid`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum AltitudeReference {
+    /// Height above the WGS84 ellipsoid (the contract's own).
+    #[default]
+    Ellipsoid,
+    /// Height above mean sea level (the EGM96 geoid).
+    Msl,
+}
+
+impl AltitudeReference {
+    /// The name used in files (`ellipsoid`, `msl`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            AltitudeReference::Ellipsoid => "ellipsoid",
+            AltitudeReference::Msl => "msl",
+        }
+    }
+}
+
+impl std::str::FromStr for AltitudeReference {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "ellipsoid" => Ok(AltitudeReference::Ellipsoid),
+            "msl" => Ok(AltitudeReference::Msl),
+            other => Err(format!(
+                "altitude_reference: unknown value {other:?} (expected ellipsoid or msl)"
+            )),
+        }
+    }
 }
 
 impl Default for GnssConfig {
@@ -55,6 +93,7 @@ impl Default for GnssConfig {
             rate_hz: 5.0,
             lever_arm_body_m: Vector3::zeros(),
             delay_ns: 0,
+            altitude_reference: AltitudeReference::Ellipsoid,
         }
     }
 }

@@ -30,8 +30,8 @@ pub mod truth;
 
 pub use camera::{CameraModel, Distortion};
 pub use config::{
-    Airframe, BaroConfig, CameraConfig, FilterProfile, GnssConfig, ImuConfig, MagConfig,
-    VehicleConfig,
+    Airframe, AltitudeReference, BaroConfig, CameraConfig, FilterProfile, GnssConfig, ImuConfig,
+    MagConfig, VehicleConfig,
 };
 pub use egomotion::{Egomotion, EgomotionSolver, MotionPrior};
 pub use geodesy::{Lla, LocalFrame};

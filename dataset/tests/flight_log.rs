@@ -5,7 +5,6 @@
 //! configuration). Skips with a message when `../shared/data` is absent.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-
 use uavnav_core::SensorEvent;
 use uavnav_dataset::{Dataset, Format, ReadOptions};
 

@@ -36,6 +36,8 @@ pub struct Estimator {
     last_ego_t1_ns: Option<i64>,
     /// `GnssConfig::delay_ns`: a fix stamped `t` was valid at `t − delay`.
     gnss_delay_ns: i64,
+    /// `GnssConfig::altitude_reference`: MSL altitudes are made ellipsoidal at push.
+    altitude_reference: uavnav_core::AltitudeReference,
     /// Time of the last sample rejected for a time jump and how many continuous ones followed.
     jump_run: Option<(i64, u32)>,
     inputs_rejected: u64,
@@ -64,6 +66,10 @@ impl Estimator {
             last_baro_t_ns: None,
             last_ego_t1_ns: None,
             gnss_delay_ns: config.gnss.map_or(0, |g| g.delay_ns),
+            altitude_reference: config
+                .gnss
+                .map(|g| g.altitude_reference)
+                .unwrap_or_default(),
             jump_run: None,
             inputs_rejected: 0,
         }
@@ -118,8 +124,16 @@ impl Estimator {
     /// Adds a GNSS fix (fused at its time of validity, its stamp less the configured GNSS delay,
     /// behind the newest IMU sample).
     pub fn push_gnss(&mut self, fix: &GnssFix) -> Result<(), InputError> {
+        let alt_m = match self.altitude_reference {
+            uavnav_core::AltitudeReference::Ellipsoid => fix.alt_m,
+            // EGM96 N at the fix (NaN for a non-finite position: refused below like the fix).
+            uavnav_core::AltitudeReference::Msl => {
+                fix.alt_m + uavnav_core::geoid::egm96_undulation_m(fix.lat_deg, fix.lon_deg)
+            }
+        };
         let shifted = GnssFix {
             t_ns: fix.t_ns.saturating_sub(self.gnss_delay_ns),
+            alt_m,
             ..*fix
         };
         let f = &shifted;

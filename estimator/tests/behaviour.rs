@@ -38,6 +38,7 @@ fn static_data(
             rate_hz: 5.0,
             lever_arm_body_m: Vector3::new(0.2, 0.0, -0.1),
             delay_ns: 0,
+            ..GnssConfig::default()
         }),
         ..Default::default()
     };
@@ -443,4 +444,51 @@ fn motion_prior_matches_truth() {
     let n = prior.ground_normal_cam0.unwrap();
     let n_true = (a.nav_from_body * flight.body_from_cam().rotation).inverse() * Vector3::z();
     assert!((n.into_inner() - n_true).norm() < 0.01);
+}
+
+#[test]
+fn msl_altitudes_are_made_ellipsoidal_with_the_geoid() {
+    // The same flight with its fixes given above mean sea level and the configuration saying so
+    // gives the same poses as with ellipsoidal fixes.
+    let s = scenario("smoke", Some(8.0));
+    let flight = Flight::new(&s).unwrap();
+    let mut vc = flight.vehicle_config();
+    vc.camera = None;
+    let run = |vc: &uavnav_core::VehicleConfig, to_msl: bool| {
+        let mut est = Estimator::new(vc, EstimatorParams::default(), Some(flight.origin()));
+        let mut gi = 0;
+        let mut last = None;
+        for smp in flight.imu() {
+            while gi < flight.gnss().len() && flight.gnss()[gi].t_ns <= smp.t_ns {
+                let mut f = flight.gnss()[gi];
+                if to_msl {
+                    f.alt_m -= uavnav_core::geoid::egm96_undulation_m(f.lat_deg, f.lon_deg);
+                }
+                est.push_gnss(&f).unwrap();
+                gi += 1;
+            }
+            last = est.push_imu(smp).unwrap().or(last);
+        }
+        last.unwrap()
+    };
+    let ellipsoidal = run(&vc, false);
+    let mut msl_cfg = vc.clone();
+    if let Some(g) = msl_cfg.gnss.as_mut() {
+        g.altitude_reference = uavnav_core::AltitudeReference::Msl;
+    }
+    let msl = run(&msl_cfg, true);
+    let n = uavnav_core::geoid::egm96_undulation_m(
+        flight.origin().lat_rad.to_degrees(),
+        flight.origin().lon_rad.to_degrees(),
+    );
+    assert!(n.abs() > 1.0, "a place with a geoid undulation: {n}");
+    assert!(
+        (msl.lla.alt_m - ellipsoidal.lla.alt_m).abs() < 1e-3,
+        "{} vs {}",
+        msl.lla.alt_m,
+        ellipsoidal.lla.alt_m
+    );
+    // Read as ellipsoidal, the same MSL fixes would sit N lower.
+    let wrong = run(&vc, true);
+    assert!((wrong.lla.alt_m - ellipsoidal.lla.alt_m + n).abs() < 0.5);
 }

@@ -85,7 +85,7 @@ proptest! {
                                  terrain in -400.0f64..5000.0, paper in any::<bool>()) {
         let c = VehicleConfig {
             imu: ImuConfig::TACTICAL_MEMS,
-            gnss: Some(GnssConfig { rate_hz: 5.0, lever_arm_body_m: Vector3::from(lever), delay_ns: 0 }),
+            gnss: Some(GnssConfig { rate_hz: 5.0, lever_arm_body_m: Vector3::from(lever), delay_ns: 0, altitude_reference: if paper { uavnav_core::AltitudeReference::Msl } else { uavnav_core::AltitudeReference::Ellipsoid } }),
             mag: None,
             baro: None,
             camera: Some(camera_config(k, rpy, t)),

@@ -197,6 +197,7 @@ impl Flight {
                 rate_hz: s.gnss.rate_hz,
                 lever_arm_body_m: Vector3::from(s.gnss.lever_arm_m),
                 delay_ns: 0,
+                ..GnssConfig::default()
             }),
             mag: s.mag.as_ref().map(|m| MagConfig {
                 rate_hz: m.rate_hz,

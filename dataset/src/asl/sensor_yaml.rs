@@ -240,10 +240,18 @@ pub fn read_gnss(path: &Path) -> Result<GnssConfig> {
         }
         None => 0.0,
     };
+    let altitude_reference = match y.get("altitude_reference") {
+        Some(node) => y
+            .str("altitude_reference")?
+            .parse()
+            .map_err(|e: String| DatasetError::parse(path, node.line, e))?,
+        None => uavnav_core::AltitudeReference::Ellipsoid,
+    };
     Ok(GnssConfig {
         rate_hz: positive(&y, "rate_hz")?,
         lever_arm_body_m: t.translation.vector,
         delay_ns: uavnav_core::s_to_ns(delay_s),
+        altitude_reference,
     })
 }
 
@@ -312,10 +320,12 @@ pub fn write_gnss(c: &GnssConfig) -> String {
     format!(
         "%YAML:1.0\nsensor_type: gnss\ncomment: written by uavnav\n\
          # Antenna phase centre in the body frame: the T_BS translation is the lever arm, m.\n{}rate_hz: {}\n\
-         delay_s: {} # a fix stamped t was valid at t - delay_s\n",
+         delay_s: {} # a fix stamped t was valid at t - delay_s\n\
+         altitude_reference: {} # ellipsoid (WGS84) or msl (EGM96 geoid)\n",
         write_t_bs(&t),
         fmt_f64(c.rate_hz),
-        fmt_f64(uavnav_core::ns_to_s(c.delay_ns))
+        fmt_f64(uavnav_core::ns_to_s(c.delay_ns)),
+        c.altitude_reference.as_str()
     )
 }
 

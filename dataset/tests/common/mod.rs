@@ -21,6 +21,7 @@ pub fn config() -> VehicleConfig {
             rate_hz: 5.0,
             lever_arm_body_m: Vector3::new(0.0, 2.0, 0.0),
             delay_ns: 220_000_000,
+            altitude_reference: uavnav_core::AltitudeReference::Msl,
         }),
         mag: Some(MagConfig {
             rate_hz: 50.0,

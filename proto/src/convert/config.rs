@@ -1,8 +1,8 @@
 //! Vehicle configuration: IMU noise, GNSS lever arm, camera model and mount, profile.
 
 use uavnav_core::{
-    Airframe, BaroConfig, CameraConfig, CameraModel, Distortion, FilterProfile, GnssConfig,
-    ImuConfig, MagConfig, VehicleConfig,
+    Airframe, AltitudeReference, BaroConfig, CameraConfig, CameraModel, Distortion, FilterProfile,
+    GnssConfig, ImuConfig, MagConfig, VehicleConfig,
 };
 
 use super::geometry::{isometry, required_quaternion, required_vector3};
@@ -53,6 +53,19 @@ impl TryFrom<&v1::GnssConfig> for GnssConfig {
                 0.0,
                 super::limits::MAX_GNSS_DELAY_S,
             )?),
+            altitude_reference: {
+                use v1::AltitudeReference as W;
+                match W::try_from(c.altitude_reference) {
+                    Ok(W::Unspecified | W::Ellipsoid) => AltitudeReference::Ellipsoid,
+                    Ok(W::Msl) => AltitudeReference::Msl,
+                    Err(_) => {
+                        return Err(ConvertError::UnknownEnum {
+                            field: "altitude_reference".to_owned(),
+                            value: c.altitude_reference,
+                        });
+                    }
+                }
+            },
         })
     }
 }
@@ -103,6 +116,10 @@ impl From<&GnssConfig> for v1::GnssConfig {
             rate_hz: c.rate_hz,
             lever_arm_body_m: Some((&c.lever_arm_body_m).into()),
             delay_s: uavnav_core::ns_to_s(c.delay_ns),
+            altitude_reference: match c.altitude_reference {
+                AltitudeReference::Ellipsoid => v1::AltitudeReference::Ellipsoid,
+                AltitudeReference::Msl => v1::AltitudeReference::Msl,
+            } as i32,
         }
     }
 }
