@@ -15,11 +15,12 @@ use uavnav_runner::{RunnerParams, VehicleRunner};
 use uavnavd::Server;
 use uavnavd::runner_engine::pose_to_wire;
 
-/// The first `seconds` of the smoke flight, every sensor, in time order.
+/// The first `seconds` of the smoke flight with a magnetometer and a barometer
+/// (`scenarios/mag-baro.toml`: the smoke flight, same seed), every sensor, in time order.
 fn flight(seconds: f64) -> (uavnav_core::VehicleConfig, Vec<SensorEvent>) {
     let text = std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../scenarios/smoke.toml"
+        "/../scenarios/mag-baro.toml"
     ))
     .unwrap();
     let scenario = uavnav_sim::scenario::Scenario::from_toml_str(&text).unwrap();
