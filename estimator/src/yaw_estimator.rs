@@ -98,6 +98,12 @@ impl Default for YawEstimator {
     }
 }
 
+/// The ZYX yaw of `nav_from_body` (atan2 of the rotated body x axis), without the other angles.
+fn yaw_of(q: &UnitQuaternion<f64>) -> f64 {
+    let (w, x, y, z) = (q.w, q.i, q.j, q.k);
+    (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z))
+}
+
 fn wrap_pi(a: f64) -> f64 {
     (a + PI).rem_euclid(TAU) - PI
 }
@@ -162,12 +168,10 @@ impl YawEstimator {
                 let e = (accel / f_norm).cross(&f_exp_b.normalize());
                 w += e * gain;
             }
-            let yaw_before = m.q.euler_angles().2;
             m.q *= UnitQuaternion::from_scaled_axis(w * dt_s);
             let f_nav = m.q.transform_vector(accel);
             let dv = Vector2::new(f_nav.x, f_nav.y) * dt_s;
             m.v += dv;
-            m.yaw = wrap_pi(m.yaw + wrap_pi(m.q.euler_angles().2 - yaw_before));
             // F = [[1,0,−a_E dt],[0,1,a_N dt],[0,0,1]]
             let (c0, c1) = (-dv.y, dv.x);
             let p = m.p;
@@ -214,6 +218,8 @@ impl YawEstimator {
         let r = sigma * sigma;
         let mut like = [0.0; N_MODELS];
         for (k, m) in self.models.iter_mut().enumerate() {
+            // The yaw state is that of the model's attitude, which the gyro propagated.
+            m.yaw = yaw_of(&m.q);
             let y = v - m.v;
             let s = Matrix2::new(m.p[(0, 0)] + r, m.p[(0, 1)], m.p[(1, 0)], m.p[(1, 1)] + r);
             let Some(si) = s.try_inverse() else { continue };
@@ -226,8 +232,8 @@ impl YawEstimator {
             let dx = kg * y;
             m.v += Vector2::new(dx[0], dx[1]);
             let dyaw = dx[2];
-            m.yaw = wrap_pi(m.yaw + dyaw);
             m.q = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), dyaw) * m.q;
+            m.yaw = yaw_of(&m.q);
             let mut p = m.p - kg * pht.transpose();
             p = (p + p.transpose()) * 0.5;
             m.p = p;
