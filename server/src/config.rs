@@ -105,6 +105,38 @@ pub struct Config {
     pub log: LogConfig,
     /// Foxglove live view.
     pub foxglove: FoxgloveConfig,
+    /// Recording of accepted inputs and output poses to MCAP files.
+    pub record: RecordConfig,
+}
+
+/// Recording settings: every accepted input and every pose, to rotating MCAP files.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RecordConfig {
+    /// Directory of the recordings; absent = no recording (the default).
+    pub directory: Option<PathBuf>,
+    /// A file is closed and the next one started once this many message bytes (encoded, before
+    /// compression) are in it.
+    pub rotate_bytes: u64,
+    /// A file is closed and the next one started after this many seconds, s.
+    pub rotate_s: f64,
+    /// Total bytes of recordings kept in the directory; the oldest files are deleted first.
+    pub retain_bytes: u64,
+    /// Bytes the queue to the writer may hold; beyond, records are dropped (counted), never
+    /// waited for.
+    pub queue_bytes: u64,
+}
+
+impl Default for RecordConfig {
+    fn default() -> Self {
+        Self {
+            directory: None,
+            rotate_bytes: 256 << 20,
+            rotate_s: 600.0,
+            retain_bytes: 10 << 30,
+            queue_bytes: 64 << 20,
+        }
+    }
 }
 
 /// Foxglove live view settings (a Foxglove WebSocket server showing every vehicle).
@@ -328,6 +360,10 @@ pub struct Cli {
     /// Serve a Foxglove live view (WebSocket) on this address, e.g. 127.0.0.1:8765 [default: off].
     #[arg(long, value_name = "HOST:PORT")]
     pub foxglove_addr: Option<String>,
+    /// Record every accepted input and every pose to rotating MCAP files in this directory
+    /// (see [record] in the config file for rotation and retention) [default: off].
+    #[arg(long, value_name = "DIR")]
+    pub record_dir: Option<PathBuf>,
 }
 
 /// Environment variables read by [`Config::load`], with the key each overrides.
@@ -344,6 +380,7 @@ pub const ENV_VARS: &[(&str, &str)] = &[
     ("UAVNAV_LOG_JSON", "log.json"),
     ("UAVNAV_LOG", "log.filter"),
     ("UAVNAV_FOXGLOVE_ADDR", "foxglove.addr"),
+    ("UAVNAV_RECORD_DIR", "record.directory"),
 ];
 
 impl Config {
@@ -439,6 +476,9 @@ impl Config {
         if let Some(v) = env("UAVNAV_FOXGLOVE_ADDR") {
             self.foxglove.addr = Some(v).filter(|a| !a.is_empty());
         }
+        if let Some(v) = env("UAVNAV_RECORD_DIR") {
+            self.record.directory = Some(PathBuf::from(v)).filter(|d| !d.as_os_str().is_empty());
+        }
         Ok(())
     }
 
@@ -471,6 +511,9 @@ impl Config {
         if let Some(a) = &cli.foxglove_addr {
             self.foxglove.addr = Some(a.clone());
         }
+        if let Some(d) = &cli.record_dir {
+            self.record.directory = Some(d.clone());
+        }
     }
 
     /// Rejects values that cannot work.
@@ -498,6 +541,15 @@ impl Config {
         }
         if self.health.period_ms == 0 {
             return bad("health.period_ms must be > 0");
+        }
+        let r = &self.record;
+        if r.rotate_bytes == 0 || r.retain_bytes == 0 || r.queue_bytes == 0 {
+            return bad(
+                "record.rotate_bytes, record.retain_bytes and record.queue_bytes must be > 0",
+            );
+        }
+        if !(r.rotate_s > 0.0 && r.rotate_s.is_finite()) {
+            return bad("record.rotate_s must be > 0");
         }
         Ok(())
     }

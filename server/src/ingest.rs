@@ -89,6 +89,8 @@ pub struct Ingestor {
     max_message_bytes: usize,
     /// The Foxglove live view, shown every accepted GNSS fix and camera frame.
     live: Option<crate::live::LiveTap>,
+    /// The recorder, handed every accepted input.
+    record: Option<crate::record::RecordTap>,
 }
 
 impl Ingestor {
@@ -99,7 +101,14 @@ impl Ingestor {
             limits,
             max_message_bytes,
             live: None,
+            record: None,
         }
+    }
+
+    /// Records every accepted input.
+    pub fn with_recorder(mut self, tap: crate::record::RecordTap) -> Self {
+        self.record = Some(tap);
+        self
     }
 
     /// Shows accepted GNSS fixes and camera frames on a live view.
@@ -164,17 +173,21 @@ impl Ingestor {
             Payload::Imu(b) => self.imu(transport, id, b).await,
             Payload::Gnss(g) => {
                 let fix = validate::gnss_fix(g)?;
-                self.single(transport, id, Input::Gnss(fix), |live| live.gnss(id, g))
-                    .await
+                self.single(transport, id, Input::Gnss(fix), payload, |live| {
+                    live.gnss(id, g)
+                })
+                .await
             }
             Payload::Mag(m) => {
                 let sample = validate::mag_sample(m)?;
-                self.single(transport, id, Input::Mag(sample), |live| live.mag(id, m))
-                    .await
+                self.single(transport, id, Input::Mag(sample), payload, |live| {
+                    live.mag(id, m)
+                })
+                .await
             }
             Payload::Baro(b) => {
                 let sample = validate::baro_sample(b)?;
-                self.single(transport, id, Input::Baro(sample), |_| {})
+                self.single(transport, id, Input::Baro(sample), payload, |_| {})
                     .await
             }
             Payload::Camera(c) => self.camera(transport, id, c).await,
@@ -219,7 +232,12 @@ impl Ingestor {
         ctx.metrics.input(transport, Kind::Imu, Outcome::Late, late);
         ctx.metrics
             .input(transport, Kind::Imu, Outcome::Future, future);
+        // The accepted samples as received, made before the batch moves to the actor.
+        let recorded = self.record.as_ref().map(|r| (r, accepted_wire(b, &batch)));
         self.send(&h, id, Msg::Data(batch)).await?;
+        if let Some((record, wire)) = recorded {
+            record.imu(id, wire);
+        }
         VehicleStats::add(&h.shared.stats.imu, accepted);
         ctx.metrics
             .input(transport, Kind::Imu, Outcome::Accepted, accepted);
@@ -244,6 +262,7 @@ impl Ingestor {
         transport: Transport,
         id: &str,
         input: Input,
+        payload: Payload<'_>,
         show: impl FnOnce(&crate::live::LiveTap),
     ) -> Result<Verdict, Rejection> {
         let kind = input.kind();
@@ -272,6 +291,9 @@ impl Ingestor {
         VehicleStats::add(h.shared.stats.of(kind), 1);
         if let Some(live) = &self.live {
             show(live);
+        }
+        if let Some(record) = &self.record {
+            record.input(id, payload);
         }
         ctx.metrics
             .input(transport, metric_kind(kind), Outcome::Accepted, 1);
@@ -328,6 +350,9 @@ impl Ingestor {
         if let Some(live) = &self.live {
             live.camera(id, c);
         }
+        if let Some(record) = &self.record {
+            record.input(id, Payload::Camera(c));
+        }
         ctx.metrics
             .input(transport, Kind::Camera, Outcome::Accepted, 1);
         h.shared
@@ -380,6 +405,9 @@ impl Ingestor {
             if wait {
                 let _ = rx.await;
             }
+        }
+        if let Some(record) = &self.record {
+            record.input(id, Payload::Config(c));
         }
         Ok(created)
     }
@@ -451,6 +479,29 @@ fn admit_imu(
         }
     }
     out
+}
+
+/// The wire samples of `b` the time gate admitted (`admitted`, in batch order): the whole batch
+/// when all were, else those whose times were admitted (a batch's times strictly increase).
+fn accepted_wire(b: &pb::ImuBatch, admitted: &[Stamped]) -> pb::ImuBatch {
+    if admitted.len() == b.samples.len() {
+        return b.clone();
+    }
+    let mut times = admitted.iter().map(|s| s.input.t_ns()).peekable();
+    let samples = b
+        .samples
+        .iter()
+        .filter(|s| {
+            if times.peek() == Some(&s.t_ns) {
+                times.next();
+                true
+            } else {
+                false
+            }
+        })
+        .copied()
+        .collect();
+    pb::ImuBatch { samples }
 }
 
 fn registry_rejection(e: RegistryError) -> Rejection {

@@ -22,6 +22,7 @@
 //! | [`live`] | the Foxglove live view (WebSocket): pose, path, GNSS fix and camera per vehicle |
 //! | [`health`] | per-vehicle health reports |
 //! | [`metrics`] | Prometheus metrics |
+//! | [`record`] | recording of accepted inputs and poses to rotating MCAP files |
 //! | [`http`] | `/metrics`, `/livez`, `/readyz` |
 //! | [`shutdown`] | signals and the drain order |
 //! | [`logging`] | `tracing` subscriber setup |
@@ -37,6 +38,7 @@ pub mod ingest;
 pub mod live;
 pub mod logging;
 pub mod metrics;
+pub mod record;
 pub mod registry;
 pub mod reorder;
 pub mod runner_engine;

@@ -181,6 +181,8 @@ pub struct Metrics {
     pub record_dropped: Family<RecordDropLabels, Counter>,
     /// Messages the recorder wrote.
     pub record_written: Counter,
+    /// Message bytes the recorder wrote (encoded protobuf, before MCAP compression).
+    pub record_bytes: Counter,
     /// Bytes waiting in the recorder's queue.
     pub record_queue_bytes: Gauge,
     /// Recording files closed (rotation or shutdown).
@@ -226,6 +228,7 @@ impl Metrics {
         let refused = Family::<RefusedLabels, Counter>::default();
         let record_dropped = Family::<RecordDropLabels, Counter>::default();
         let record_written = Counter::default();
+        let record_bytes = Counter::default();
         let record_queue_bytes = Gauge::default();
         let record_files = Counter::default();
         let poses = Counter::default();
@@ -262,6 +265,11 @@ impl Metrics {
             "record_written",
             "Messages the recorder wrote",
             record_written.clone(),
+        );
+        registry.register(
+            "record_bytes",
+            "Message bytes the recorder wrote (before compression)",
+            record_bytes.clone(),
         );
         registry.register(
             "record_queue_bytes",
@@ -346,6 +354,7 @@ impl Metrics {
             refused,
             record_dropped,
             record_written,
+            record_bytes,
             record_queue_bytes,
             record_files,
             poses,

@@ -23,6 +23,7 @@ use crate::hub::Hub;
 use crate::ingest::Ingestor;
 use crate::live::{LiveTap, LiveView};
 use crate::metrics::Metrics;
+use crate::record::Recorder;
 use crate::registry::Registry;
 use crate::validate::ImageLimits;
 use crate::vision_pool::VisionPool;
@@ -53,6 +54,7 @@ pub struct RunningServer {
     http: (JoinHandle<()>, oneshot::Sender<()>),
     pool: Arc<VisionPool>,
     live: Option<LiveView>,
+    recorder: Option<Recorder>,
 }
 
 impl Server {
@@ -86,6 +88,14 @@ impl Server {
         };
         let mut ingestor =
             Ingestor::new(Arc::clone(&registry), limits, config.grpc.max_message_bytes);
+        let recorder = match &config.record.directory {
+            Some(dir) => {
+                let r = Recorder::start(dir, &config.record, &metrics, &hub)?;
+                ingestor = ingestor.with_recorder(r.tap());
+                Some(r)
+            }
+            None => None,
+        };
         let live = match &config.foxglove.addr {
             Some(addr) => {
                 let view = LiveView::start(addr, metrics.foxglove_dropped.clone()).await?;
@@ -132,6 +142,7 @@ impl Server {
             http,
             pool,
             live,
+            recorder,
         })
     }
 }
@@ -273,6 +284,10 @@ impl RunningServer {
         let _ = tokio::time::timeout(SERVE_DRAIN, http_task).await;
         if let Some(view) = self.live.take() {
             view.stop().await;
+        }
+        // After the drain: the recording ends with the vehicles' last poses.
+        if let Some(r) = self.recorder.take() {
+            r.stop().await;
         }
         let pool = Arc::clone(&self.pool);
         let _ = tokio::task::spawn_blocking(move || pool.shutdown()).await;

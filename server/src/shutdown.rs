@@ -6,7 +6,8 @@
 //! 2. stop the Zenoh subscriptions and the gRPC listener;
 //! 3. tell every actor to stop: each fuses what is queued, waits for its vision job and publishes
 //!    a final health report;
-//! 4. publish the remaining outputs on Zenoh, close the session, stop HTTP and the vision pool.
+//! 4. publish the remaining outputs on Zenoh, close the session, stop HTTP, finish the recording
+//!    (after the drain, so it ends with the vehicles' last poses) and stop the vision pool.
 
 /// Resolves on the first SIGTERM or SIGINT (Ctrl-C).
 pub async fn signal() {

@@ -1,0 +1,264 @@
+//! Recording: a simulated flight streamed into a service with `[record]` on is in the MCAP file
+//! afterwards, inputs in order, and replaying those inputs gives exactly the recorded poses; files
+//! rotate by size and the oldest are deleted; a tiny queue budget drops (counted), never blocks.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use common::test_config;
+use prost::Message;
+use uavnav_core::SensorEvent;
+use uavnav_dataset::mcap_io::reader::McapDataset;
+use uavnav_proto::v1 as pb;
+use uavnav_runner::{RunnerParams, VehicleRunner};
+use uavnavd::metrics::{RecordDrop, RecordDropLabels};
+use uavnavd::runner_engine::pose_to_wire;
+use uavnavd::{Config, RunningServer, Server};
+
+/// The first `seconds` of the smoke flight, every sensor, in time order.
+fn flight(seconds: f64) -> (uavnav_core::VehicleConfig, Vec<SensorEvent>) {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../scenarios/smoke.toml"
+    ))
+    .unwrap();
+    let scenario = uavnav_sim::scenario::Scenario::from_toml_str(&text).unwrap();
+    let flight = uavnav_sim::flight::Flight::new(&scenario).unwrap();
+    let mut events = Vec::new();
+    let mut t_end = None;
+    for e in flight.events() {
+        let e = e.unwrap();
+        let end = *t_end.get_or_insert(e.t_ns() + (seconds * 1e9) as i64);
+        if e.t_ns() > end {
+            break;
+        }
+        events.push(e);
+    }
+    (flight.vehicle_config(), events)
+}
+
+fn offline(config: &uavnav_core::VehicleConfig, events: &[SensorEvent]) -> Vec<pb::PoseEstimate> {
+    let mut runner = VehicleRunner::new(config.clone(), RunnerParams::default(), None);
+    let mut poses = Vec::new();
+    for e in events {
+        if let Ok(p) = runner.push_inline(e.clone()) {
+            poses.extend(p.iter().map(pose_to_wire).map(strip));
+        }
+    }
+    poses
+}
+
+fn strip(mut p: pb::PoseEstimate) -> pb::PoseEstimate {
+    p.vehicle_id.clear();
+    p.ingest_wall_ns = 0;
+    p
+}
+
+fn envelope(id: &str, seq: u64, e: &SensorEvent) -> pb::SensorEnvelope {
+    use pb::sensor_envelope::Payload as P;
+    let payload = match e {
+        SensorEvent::Imu(s) => P::Imu(pb::ImuBatch {
+            samples: vec![s.into()],
+        }),
+        other => P::from(other),
+    };
+    pb::SensorEnvelope {
+        vehicle_id: id.into(),
+        sequence: seq,
+        payload: Some(payload),
+    }
+}
+
+fn record_config(dir: &Path) -> Config {
+    let mut cfg = test_config();
+    cfg.record.directory = Some(dir.to_owned());
+    cfg
+}
+
+/// Streams the flight into `server` as vehicle `id` and waits for `n_poses` poses.
+async fn stream_flight(
+    server: &RunningServer,
+    id: &str,
+    config: &uavnav_core::VehicleConfig,
+    events: &[SensorEvent],
+    n_poses: usize,
+) -> Vec<pb::PoseEstimate> {
+    let mut rx = server.registry().ctx().hub.poses.subscribe();
+    let mut c = common::client(server).await;
+    c.configure_vehicle(pb::ConfigureVehicleRequest {
+        vehicle_id: id.into(),
+        config: Some(config.into()),
+    })
+    .await
+    .unwrap();
+    let envs: Vec<_> = events
+        .iter()
+        .enumerate()
+        .map(|(i, e)| envelope(id, i as u64, e))
+        .collect();
+    let n = envs.len();
+    let mut acks = c
+        .ingest(futures::stream::iter(envs))
+        .await
+        .unwrap()
+        .into_inner();
+    let mut accepted = 0;
+    while let Some(a) = acks.message().await.unwrap() {
+        assert_eq!(a.status, pb::IngestStatus::Accepted as i32, "{a:?}");
+        accepted += 1;
+        if accepted == n {
+            break;
+        }
+    }
+    let mut got = Vec::with_capacity(n_poses);
+    let all = async {
+        while got.len() < n_poses {
+            got.extend(rx.recv().await.unwrap().to_wire().into_iter().map(strip));
+        }
+    };
+    tokio::time::timeout(Duration::from_secs(60), all)
+        .await
+        .expect("all poses within 60 s");
+    got
+}
+
+/// The recordings in `dir`, sorted by name (= index).
+fn files(dir: &Path) -> Vec<PathBuf> {
+    let mut out: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .collect();
+    out.sort();
+    out
+}
+
+/// The poses recorded on `/uavnav/{id}/pose`, in file order.
+fn recorded_poses(path: &Path, id: &str) -> Vec<pb::PoseEstimate> {
+    let bytes = std::fs::read(path).unwrap();
+    let topic = format!("/uavnav/{id}/pose");
+    mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .map(|m| m.unwrap())
+        .filter(|m| m.channel.topic == topic)
+        .map(|m| strip(pb::PoseEstimate::decode(m.data.as_ref()).unwrap()))
+        .collect()
+}
+
+fn dropped(server: &RunningServer, reason: RecordDrop) -> u64 {
+    server
+        .metrics()
+        .record_dropped
+        .get_or_create(&RecordDropLabels { reason })
+        .get()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn recorded_flight_replays_to_the_recorded_poses() {
+    let dir = tempfile::tempdir().unwrap();
+    let (config, events) = flight(3.0);
+    let want = offline(&config, &events);
+    assert!(want.len() > 300, "{} offline poses", want.len());
+
+    let server = Server::start(record_config(dir.path())).await.unwrap();
+    let live = stream_flight(&server, "rec", &config, &events, want.len()).await;
+    assert_eq!(dropped(&server, RecordDrop::QueueFull), 0);
+    assert_eq!(dropped(&server, RecordDrop::WriteError), 0);
+    let metrics = server.metrics().clone();
+    server.shutdown().await.unwrap();
+    assert!(metrics.record_bytes.get() > 0);
+    assert_eq!(metrics.record_files.get(), 1);
+
+    let files = files(dir.path());
+    assert_eq!(files.len(), 1, "{files:?}");
+    let ds = McapDataset::open(&files[0], Some("rec")).unwrap();
+    assert!(ds.has_config());
+    assert_eq!(ds.config(), &config);
+    let read: Vec<SensorEvent> = ds.events().unwrap().map(|e| e.unwrap().event).collect();
+    assert_eq!(read.len(), events.len());
+    assert!(
+        read == events,
+        "the recorded inputs differ from the sent ones"
+    );
+
+    let recorded = recorded_poses(&files[0], "rec");
+    assert_eq!(recorded.len(), live.len());
+    assert!(
+        recorded == live,
+        "the recorded poses differ from the published ones"
+    );
+    let replayed = offline(ds.config(), &read);
+    assert_eq!(replayed.len(), recorded.len());
+    for (i, (r, p)) in replayed.iter().zip(&recorded).enumerate() {
+        assert_eq!(r, p, "pose {i}: replay differs from the recording");
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rotation_by_size_and_retention() {
+    let dir = tempfile::tempdir().unwrap();
+    let (config, events) = flight(3.0);
+    let want = offline(&config, &events);
+    let mut cfg = record_config(dir.path());
+    cfg.record.rotate_bytes = 20_000;
+    cfg.record.retain_bytes = 60_000;
+    // A stale recording from an earlier run: the index continues after it and retention
+    // deletes it first.
+    std::fs::write(dir.path().join("uavnavd-000007.mcap"), [0u8; 100]).unwrap();
+    let server = Server::start(cfg).await.unwrap();
+    stream_flight(&server, "rot", &config, &events, want.len()).await;
+    let metrics = server.metrics().clone();
+    server.shutdown().await.unwrap();
+
+    let closed = metrics.record_files.get();
+    assert!(closed >= 5, "{closed} files closed");
+    let files = files(dir.path());
+    assert!(files.len() >= 2, "{files:?}");
+    assert!((files.len() as u64) < closed, "nothing deleted: {files:?}");
+    let names: Vec<_> = files
+        .iter()
+        .map(|f| f.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    assert!(!names.contains(&"uavnavd-000007.mcap".to_owned()));
+    assert!(!names.contains(&"uavnavd-000008.mcap".to_owned()));
+    let total: u64 = files
+        .iter()
+        .map(|f| std::fs::metadata(f).unwrap().len())
+        .sum();
+    assert!(total <= 60_000, "{total} bytes kept");
+    // Every kept file was finished: its poses read back.
+    for f in &files {
+        assert!(!recorded_poses(f, "rot").is_empty(), "{}", f.display());
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_full_queue_drops_and_counts_instead_of_blocking() {
+    let dir = tempfile::tempdir().unwrap();
+    let (config, events) = flight(1.0);
+    let want = offline(&config, &events);
+    let mut cfg = record_config(dir.path());
+    cfg.record.queue_bytes = 8;
+    let server = Server::start(cfg).await.unwrap();
+    let got = stream_flight(&server, "tiny", &config, &events, want.len()).await;
+    assert_eq!(got, want);
+    // Inputs are dropped before their acks; poses as the recorder's feed task reads them, which
+    // may trail the test's own subscription.
+    let every = (events.len() + 1 + want.len()) as u64;
+    let all_counted = common::eventually(Duration::from_secs(10), || {
+        dropped(&server, RecordDrop::QueueFull) >= every
+    })
+    .await;
+    let full = dropped(&server, RecordDrop::QueueFull);
+    assert!(all_counted, "{full} of {every} dropped");
+    assert_eq!(server.metrics().record_written.get(), 0);
+    let text = server.metrics().encode();
+    assert!(
+        text.contains("uavnav_record_dropped_total{reason=\"queue_full\"}"),
+        "{text}"
+    );
+    server.shutdown().await.unwrap();
+}
