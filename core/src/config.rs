@@ -51,41 +51,9 @@ pub struct GnssConfig {
     pub altitude_reference: AltitudeReference,
 }
 
-/// What a GNSS altitude is measured from. uavnav works in height above the WGS84 ellipsoid;
-/// receivers and autopilots often give height above mean sea level (ArduPilot `GPS.Alt`, NMEA
-/// GGA, MAVLink `GPS_RAW_INT.alt`), which differs by the geoid undulation (+51 m in northern
-/// Spain, −30 m over India): the estimator converts with EGM96 (`crate::geoid`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
-pub enum AltitudeReference {
-    /// Height above the WGS84 ellipsoid (the contract's own).
-    #[default]
-    Ellipsoid,
-    /// Height above mean sea level (the EGM96 geoid).
-    Msl,
-}
-
-impl AltitudeReference {
-    /// The name used in files (`ellipsoid`, `msl`).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            AltitudeReference::Ellipsoid => "ellipsoid",
-            AltitudeReference::Msl => "msl",
-        }
-    }
-}
-
-impl std::str::FromStr for AltitudeReference {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "ellipsoid" => Ok(AltitudeReference::Ellipsoid),
-            "msl" => Ok(AltitudeReference::Msl),
-            other => Err(format!(
-                "altitude_reference: unknown value {other:?} (expected ellipsoid or msl)"
-            )),
-        }
-    }
-}
+/// What a GNSS altitude is measured from (receivers and autopilots often give height above mean
+/// sea level: ArduPilot `GPS.Alt`, NMEA GGA, MAVLink `GPS_RAW_INT.alt`); see [`crate::geoid`].
+pub use crate::geoid::AltitudeReference;
 
 impl Default for GnssConfig {
     fn default() -> Self {

@@ -124,13 +124,10 @@ impl Estimator {
     /// Adds a GNSS fix (fused at its time of validity, its stamp less the configured GNSS delay,
     /// behind the newest IMU sample).
     pub fn push_gnss(&mut self, fix: &GnssFix) -> Result<(), InputError> {
-        let alt_m = match self.altitude_reference {
-            uavnav_core::AltitudeReference::Ellipsoid => fix.alt_m,
-            // EGM96 N at the fix (NaN for a non-finite position: refused below like the fix).
-            uavnav_core::AltitudeReference::Msl => {
-                fix.alt_m + uavnav_core::geoid::egm96_undulation_m(fix.lat_deg, fix.lon_deg)
-            }
-        };
+        // EGM96 N at the fix for MSL (NaN for a non-finite position: refused below like the fix).
+        let alt_m = self
+            .altitude_reference
+            .to_ellipsoid(fix.lat_deg, fix.lon_deg, fix.alt_m);
         let shifted = GnssFix {
             t_ns: fix.t_ns.saturating_sub(self.gnss_delay_ns),
             alt_m,
