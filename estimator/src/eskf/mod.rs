@@ -1,47 +1,39 @@
 //! The error-state EKF (profile `eskf`): the nominal state runs at the fusion horizon, a fixed delay
 //! behind the newest IMU sample; buffered measurements are fused at their own time of validity;
 //! the [`OutputPredictor`] carries the state forward to every IMU sample.
+//!
+//! | module | what it holds |
+//! |---|---|
+//! | this file | the filter's state, horizon stepping, buffered events, GNSS, baro and vision fusion |
+//! | [`heading`] | the heading lifecycle ([`HeadingSource`]), magnetometer and yaw-bank alignment |
+//! | `report` | mode, health, the pose output, the motion prior for vision |
+
+mod heading;
+mod report;
+
+pub use heading::HeadingSource;
 
 use std::collections::VecDeque;
 
-use nalgebra::{Isometry3, Matrix3, UnitQuaternion, Vector2, Vector3};
-use uavnav_core::magnetic::{MagneticField, MagneticModel, decimal_year};
-use uavnav_core::{Egomotion, ImuSample, Lla, LocalFrame, MotionPrior, VehicleConfig};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+use uavnav_core::magnetic::MagneticField;
+use uavnav_core::{Egomotion, ImuSample, Lla, LocalFrame, VehicleConfig};
 
 use crate::aid_sources::baro_height::{BaroHeightSource, BaroParams};
 use crate::aid_sources::gnss_pos::{GnssMeas, GnssPosSource, white_noise};
 use crate::aid_sources::gnss_vel::GnssVelSource;
-use crate::aid_sources::mag_heading::{MagHeadingSource, MagState, heading_from_field};
+use crate::aid_sources::mag_heading::MagHeadingSource;
 use crate::aid_sources::vision::{VisionSource, VisionUse};
 use crate::buffer::{DelayBuffer, Event};
-use crate::health::{Health, Mode, PoseHealth};
-use crate::init::{Initialiser, hold_yaw_unknown, set_yaw, yaw_from_course};
-use crate::output::{AidingFlags, PoseOutput, euler_sigma};
+use crate::init::{Initialiser, hold_yaw_unknown};
+use crate::output::PoseOutput;
 use crate::output_predictor::{OutputPredictor, mean_of};
 use crate::params::EstimatorParams;
 use crate::prediction::{
     ErrorDynamics, GravityCache, ImuMean, ProcessNoise, earth_rate_ned, integrate_nominal,
 };
-use crate::state::{Cov, ErrVec, IP, ITH, IV, N, Nominal, PoseClone, augment_clone, clear_clone};
+use crate::state::{Cov, ErrVec, ITH, Nominal, PoseClone, augment_clone, clear_clone};
 use crate::yaw_estimator::YawEstimator;
-
-/// Where the filter's heading came from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum HeadingSource {
-    /// Not known yet: the yaw σ is that of a uniform heading and the yaw is not corrected.
-    #[default]
-    Unknown,
-    /// The magnetometer (against the world magnetic model's declination).
-    Magnetometer,
-    /// The yaw estimator (Gaussian sum fed by GNSS velocity and the IMU).
-    YawEstimator,
-    /// The GNSS course (only with `EstimatorParams::course_heading`).
-    Course,
-}
-
-/// UNIX time of 2000-01-01, ns: stamps before it are on another clock (time since boot), and the
-/// date for the magnetic model is unknown.
-const UNIX_2000_NS: i64 = 946_684_800_000_000_000;
 
 /// Covariance-prediction accumulator (PX4 downsampling of the covariance prediction).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -483,146 +475,6 @@ impl Eskf {
         }
     }
 
-    fn feed_yaw_estimator(&mut self, m: &GnssMeas) {
-        if let Some(v) = m.vel_ned_mps {
-            self.yaw_est
-                .fuse_velocity(m.t_ns, Vector2::new(v.x, v.y), m.sigma_vel_mps);
-        }
-    }
-
-    /// Aligns an unknown heading from the yaw estimator (or the course when allowed), and resets
-    /// an estimator-aligned heading that GNSS velocity keeps contradicting.
-    fn manage_heading(&mut self, m: &GnssMeas) {
-        let mag_active = self.mag.state == MagState::Active && self.mag.diag.fused > 0;
-        let gsf = self.yaw_est.converged_yaw();
-        if !self.yaw_aligned {
-            if let (Some((yaw, sigma)), Some(x)) = (gsf, self.x.as_mut()) {
-                set_yaw(
-                    x,
-                    &mut self.p,
-                    yaw,
-                    sigma.max(self.params.init_yaw_sigma_rad * 0.5),
-                );
-                self.yaw_aligned = true;
-                self.heading = HeadingSource::YawEstimator;
-                self.corrected = true;
-                self.forget_horizontal_accel_bias();
-            } else if self.course_heading
-                && let Some(v) = m.vel_ned_mps
-                && v.xy().norm() >= self.params.init_min_speed_mps
-                && let Some(x) = self.x.as_mut()
-            {
-                yaw_from_course(x, &mut self.p, &v, &self.params);
-                self.yaw_aligned = true;
-                self.heading = HeadingSource::Course;
-                self.corrected = true;
-            }
-            return;
-        }
-        // Emergency reset: GNSS velocity rejected for a while and the yaw estimator confidently
-        // elsewhere (a heading aligned on a wrong hypothesis, or lost in a manoeuvre).
-        let rejected_for = if self.gnss_vel.diag.consecutive_rejects > 0 {
-            m.t_ns - self.gnss_vel.diag.first_reject_t_ns
-        } else {
-            0
-        };
-        if mag_active || rejected_for < self.params.yaw_reset_timeout_ns {
-            return;
-        }
-        if let (Some((yaw, sigma)), Some(x)) = (gsf, self.x.as_mut()) {
-            let (_, _, cur) = x.q.euler_angles();
-            let d = (yaw - cur + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
-                - std::f64::consts::PI;
-            let s = (self.p[(ITH + 2, ITH + 2)] + sigma * sigma).sqrt();
-            if d.abs() > 3.0 * s {
-                set_yaw(
-                    x,
-                    &mut self.p,
-                    yaw,
-                    sigma.max(self.params.init_yaw_sigma_rad * 0.5),
-                );
-                self.heading = HeadingSource::YawEstimator;
-                self.yaw_resets += 1;
-                self.corrected = true;
-            }
-        }
-    }
-
-    /// After a heading alignment late in a flight: what the filter learnt of the horizontal
-    /// accelerometer bias under an unknown heading is not to be trusted (velocity errors from the
-    /// wrong heading went partly into it); back to its initial σ, uncorrelated.
-    fn forget_horizontal_accel_bias(&mut self) {
-        let s2 = self.params.init_accel_bias_sigma_mps2.powi(2);
-        for k in 0..2 {
-            let i = crate::state::IBA + k;
-            self.p.row_mut(i).fill(0.0);
-            self.p.column_mut(i).fill(0.0);
-            self.p[(i, i)] = s2;
-        }
-        if let Some(x) = self.x.as_mut() {
-            x.ba.x = 0.0;
-            x.ba.y = 0.0;
-        }
-    }
-
-    /// The model field for this flight, computed once at the origin and the data's date.
-    fn model_field(&mut self, t_ns: i64) -> Option<(MagneticField, f64)> {
-        if self.mag_field.is_none() {
-            let origin = self.frame.as_ref()?.origin();
-            let (year, extra) = if t_ns > UNIX_2000_NS {
-                let y = decimal_year(t_ns);
-                // Linear secular variation outside 2025–2030: ~0.15° of declination per year.
-                (
-                    y,
-                    (0.15f64 * MagneticModel::years_outside_validity(y)).to_radians(),
-                )
-            } else {
-                // Unknown date: mid-validity, with a few years' worth of declination change.
-                (2027.5, 1f64.to_radians())
-            };
-            self.mag_field = Some((MagneticModel::field(&origin, year), extra));
-        }
-        self.mag_field
-    }
-
-    fn fuse_mag(&mut self, t_ns: i64, m_b: &Vector3<f64>) {
-        let Some((field, extra)) = self.model_field(t_ns) else {
-            return;
-        };
-        let Some(x) = self.x else { return };
-        let sigma = self.params.mag_heading_sigma_rad.hypot(extra);
-        if !self.yaw_aligned {
-            if !self.mag.check_alive(m_b)
-                || !self
-                    .mag
-                    .consistent(&x, m_b, &field, self.params.mag_max_inclination_error_rad)
-            {
-                return;
-            }
-            if let (Some(yaw), Some(xm)) = (
-                heading_from_field(&x, m_b, field.declination_rad()),
-                self.x.as_mut(),
-            ) {
-                set_yaw(xm, &mut self.p, yaw, sigma * 2.0);
-                self.yaw_aligned = true;
-                self.heading = HeadingSource::Magnetometer;
-                self.corrected = true;
-            }
-            return;
-        }
-        let dx = self.mag.fuse(
-            &x,
-            &mut self.p,
-            m_b,
-            &field,
-            sigma,
-            self.params.mag_max_inclination_error_rad,
-            self.params.gate_sigma,
-            t_ns,
-        );
-        self.inject(dx);
-    }
-
     fn fuse_baro(&mut self, t_ns: i64, pressure_pa: f64) {
         let (Some(x), Some(sigma_pa)) = (self.x, self.baro_sigma_pa) else {
             return;
@@ -734,164 +586,5 @@ impl Eskf {
 
     fn buffer_pending_ego_t0(&self) -> Vec<i64> {
         self.buffer.pending_ego_t0()
-    }
-
-    /// The current mode.
-    pub fn mode(&self) -> Mode {
-        let Some(x) = self.x.as_ref() else {
-            return Mode::Initialising;
-        };
-        let pos_var = self.p[(IP, IP)] + self.p[(IP + 1, IP + 1)];
-        if !x.is_finite()
-            || !pos_var.is_finite()
-            || pos_var.sqrt() > self.params.diverged_pos_sigma_m
-        {
-            return Mode::Diverged;
-        }
-        let to = self.params.aid_timeout_ns;
-        if self.gnss_pos.diag.active(x.t_ns, to) {
-            Mode::Nominal
-        } else if self.vision.trans.active(x.t_ns, to) || self.vision.rot.active(x.t_ns, to) {
-            Mode::GnssDeniedVision
-        } else {
-            Mode::InertialOnly
-        }
-    }
-
-    /// Health at the current horizon.
-    pub fn health(&self) -> Health {
-        let mut cov_diag = [0.0; N];
-        for (k, c) in cov_diag.iter_mut().enumerate() {
-            *c = self.p[(k, k)];
-        }
-        Health {
-            mode: self.mode(),
-            gnss_pos: self.gnss_pos.diag,
-            gnss_vel: self.gnss_vel.diag,
-            vision_rot: self.vision.rot,
-            vision_trans: self.vision.trans,
-            mag: self.mag.diag,
-            baro: self.baro.diag,
-            yaw_resets: self.yaw_resets,
-            divergence_resets: 0,
-            inputs_rejected: 0,
-            late_dropped: self.late_dropped,
-            vision_no_clone: self.vision.no_clone,
-            gnss_resets: self.gnss_pos.resets + self.gnss_vel.resets,
-            cov_diag,
-        }
-    }
-
-    /// [`Eskf::health`]'s summary, built without the full snapshot (this runs for every output).
-    fn pose_health(&self) -> PoseHealth {
-        PoseHealth {
-            mode: self.mode(),
-            gnss_pos: (&self.gnss_pos.diag).into(),
-            gnss_vel: (&self.gnss_vel.diag).into(),
-            vision_rot: (&self.vision.rot).into(),
-            vision_trans: (&self.vision.trans).into(),
-            mag: (&self.mag.diag).into(),
-            baro: (&self.baro.diag).into(),
-            inputs_rejected: 0,
-            late_dropped: self.late_dropped,
-            vision_no_clone: self.vision.no_clone,
-            gnss_resets: self.gnss_pos.resets + self.gnss_vel.resets,
-        }
-    }
-
-    fn output(&mut self) -> Option<PoseOutput> {
-        let frame = *self.frame.as_ref()?;
-        let p_out = self.out.x.as_ref()?.p;
-        let lla = self
-            .lla
-            .get_or_insert_with(|| crate::output::LlaLinearizer::new(frame, &p_out))
-            .lla(&p_out);
-        let o = self.out.x.as_ref()?;
-        let x = self.x.as_ref()?;
-        let to = self.params.aid_timeout_ns;
-        let d = |i: usize| {
-            Vector3::new(
-                self.p[(i, i)],
-                self.p[(i + 1, i + 1)],
-                self.p[(i + 2, i + 2)],
-            )
-            .map(|v| v.max(0.0).sqrt())
-        };
-        let cov_th: Matrix3<f64> = self.p.fixed_view::<3, 3>(ITH, ITH).into_owned();
-        let (r, p_, y) = o.q.euler_angles();
-        Some(PoseOutput {
-            t_ns: o.t_ns,
-            lla,
-            pos_ned_m: o.p,
-            vel_ned_mps: o.v,
-            nav_from_body: o.q,
-            euler_rad: Vector3::new(r, p_, y),
-            sigma_pos_ned_m: d(IP),
-            sigma_vel_mps: d(IV),
-            sigma_att_rad: euler_sigma(&o.q, &cov_th),
-            gyro_bias_radps: x.bg,
-            accel_bias_mps2: x.ba,
-            health: self.pose_health(),
-            aiding: AidingFlags {
-                gnss_pos: self.gnss_pos.diag.active(x.t_ns, to),
-                gnss_vel: self.gnss_vel.diag.active(x.t_ns, to),
-                vision_rot: self.vision.rot.active(x.t_ns, to),
-                vision_trans: self.vision.trans.active(x.t_ns, to),
-            },
-        })
-    }
-
-    /// Before alignment there is no attitude (no ground plane, no velocity) but the relative
-    /// rotation still follows from the raw gyros with the bias taken as zero at its initial σ.
-    /// Without it the front end falls back to an unaided essential matrix, which over flat ground
-    /// (a planar scene) can return a confident wrong rotation.
-    fn uninitialised_prior(&self, t0_ns: i64, t1_ns: i64) -> MotionPrior {
-        let Some(bfc) = self.body_from_cam else {
-            return MotionPrior::default();
-        };
-        let Some(b0_from_b1) =
-            crate::motion_prior::gyro_rotation(&self.imu, t0_ns, t1_ns, &Vector3::zeros())
-        else {
-            return MotionPrior::default();
-        };
-        let dt_s = (t1_ns - t0_ns) as f64 * 1e-9;
-        let r_bc = bfc.rotation;
-        MotionPrior {
-            cam1_from_cam0: Some(r_bc.inverse() * b0_from_b1.inverse() * r_bc),
-            rot_sigma_rad: self.gyro_psd.sqrt() * dt_s.sqrt()
-                + self.params.init_gyro_bias_sigma_radps * dt_s,
-            ..MotionPrior::default()
-        }
-    }
-
-    /// The prior for the vision front end between frame times `t0_ns < t1_ns` (see
-    /// [`MotionPrior`]); fields are `None` where the filter cannot tell.
-    pub fn motion_prior(&self, t0_ns: i64, t1_ns: i64, terrain_elevation_m: f64) -> MotionPrior {
-        let (Some(bfc), Some(o), Some(frame)) =
-            (self.body_from_cam, self.out.x.as_ref(), self.frame.as_ref())
-        else {
-            return self.uninitialised_prior(t0_ns, t1_ns);
-        };
-        let bias_sigma = self.p[(crate::state::IBG, crate::state::IBG)]
-            .max(0.0)
-            .sqrt();
-        let now = crate::motion_prior::NowState {
-            t_ns: o.t_ns,
-            q: o.q,
-            p: o.p,
-            v: o.v,
-            bg: o.bg,
-        };
-        crate::motion_prior::prior(
-            &self.imu,
-            &bfc,
-            frame,
-            &now,
-            t0_ns,
-            t1_ns,
-            terrain_elevation_m,
-            self.gyro_psd.sqrt(),
-            bias_sigma,
-        )
     }
 }

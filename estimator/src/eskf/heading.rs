@@ -1,0 +1,172 @@
+//! The heading of the error-state filter: where it comes from (magnetometer, yaw-hypothesis bank,
+//! course for a fixed wing), its alignment from unknown, the emergency reset from the bank, and
+//! the magnetometer's fusion against the world magnetic model.
+
+use nalgebra::{Vector2, Vector3};
+use uavnav_core::magnetic::{MagneticField, MagneticModel, decimal_year};
+
+use super::Eskf;
+use crate::aid_sources::gnss_pos::GnssMeas;
+use crate::aid_sources::mag_heading::{MagState, heading_from_field};
+use crate::init::{set_yaw, yaw_from_course};
+use crate::state::ITH;
+
+/// Where the filter's heading came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum HeadingSource {
+    /// Not known yet: the yaw σ is that of a uniform heading and the yaw is not corrected.
+    #[default]
+    Unknown,
+    /// The magnetometer (against the world magnetic model's declination).
+    Magnetometer,
+    /// The yaw estimator (Gaussian sum fed by GNSS velocity and the IMU).
+    YawEstimator,
+    /// The GNSS course (only with `EstimatorParams::course_heading`).
+    Course,
+}
+
+/// UNIX time of 2000-01-01, ns: stamps before it are on another clock (time since boot), and the
+/// date for the magnetic model is unknown.
+const UNIX_2000_NS: i64 = 946_684_800_000_000_000;
+
+impl Eskf {
+    pub(super) fn feed_yaw_estimator(&mut self, m: &GnssMeas) {
+        if let Some(v) = m.vel_ned_mps {
+            self.yaw_est
+                .fuse_velocity(m.t_ns, Vector2::new(v.x, v.y), m.sigma_vel_mps);
+        }
+    }
+
+    /// Aligns an unknown heading from the yaw estimator (or the course when allowed), and resets
+    /// an estimator-aligned heading that GNSS velocity keeps contradicting.
+    pub(super) fn manage_heading(&mut self, m: &GnssMeas) {
+        let mag_active = self.mag.state == MagState::Active && self.mag.diag.fused > 0;
+        let gsf = self.yaw_est.converged_yaw();
+        if !self.yaw_aligned {
+            if let (Some((yaw, sigma)), Some(x)) = (gsf, self.x.as_mut()) {
+                set_yaw(
+                    x,
+                    &mut self.p,
+                    yaw,
+                    sigma.max(self.params.init_yaw_sigma_rad * 0.5),
+                );
+                self.yaw_aligned = true;
+                self.heading = HeadingSource::YawEstimator;
+                self.corrected = true;
+                self.forget_horizontal_accel_bias();
+            } else if self.course_heading
+                && let Some(v) = m.vel_ned_mps
+                && v.xy().norm() >= self.params.init_min_speed_mps
+                && let Some(x) = self.x.as_mut()
+            {
+                yaw_from_course(x, &mut self.p, &v, &self.params);
+                self.yaw_aligned = true;
+                self.heading = HeadingSource::Course;
+                self.corrected = true;
+            }
+            return;
+        }
+        // Emergency reset: GNSS velocity rejected for a while and the yaw estimator confidently
+        // elsewhere (a heading aligned on a wrong hypothesis, or lost in a manoeuvre).
+        let rejected_for = if self.gnss_vel.diag.consecutive_rejects > 0 {
+            m.t_ns - self.gnss_vel.diag.first_reject_t_ns
+        } else {
+            0
+        };
+        if mag_active || rejected_for < self.params.yaw_reset_timeout_ns {
+            return;
+        }
+        if let (Some((yaw, sigma)), Some(x)) = (gsf, self.x.as_mut()) {
+            let (_, _, cur) = x.q.euler_angles();
+            let d = (yaw - cur + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                - std::f64::consts::PI;
+            let s = (self.p[(ITH + 2, ITH + 2)] + sigma * sigma).sqrt();
+            if d.abs() > 3.0 * s {
+                set_yaw(
+                    x,
+                    &mut self.p,
+                    yaw,
+                    sigma.max(self.params.init_yaw_sigma_rad * 0.5),
+                );
+                self.heading = HeadingSource::YawEstimator;
+                self.yaw_resets += 1;
+                self.corrected = true;
+            }
+        }
+    }
+
+    /// After a heading alignment late in a flight: what the filter learnt of the horizontal
+    /// accelerometer bias under an unknown heading is not to be trusted (velocity errors from the
+    /// wrong heading went partly into it); back to its initial σ, uncorrelated.
+    fn forget_horizontal_accel_bias(&mut self) {
+        let s2 = self.params.init_accel_bias_sigma_mps2.powi(2);
+        for k in 0..2 {
+            let i = crate::state::IBA + k;
+            self.p.row_mut(i).fill(0.0);
+            self.p.column_mut(i).fill(0.0);
+            self.p[(i, i)] = s2;
+        }
+        if let Some(x) = self.x.as_mut() {
+            x.ba.x = 0.0;
+            x.ba.y = 0.0;
+        }
+    }
+
+    /// The model field for this flight, computed once at the origin and the data's date.
+    fn model_field(&mut self, t_ns: i64) -> Option<(MagneticField, f64)> {
+        if self.mag_field.is_none() {
+            let origin = self.frame.as_ref()?.origin();
+            let (year, extra) = if t_ns > UNIX_2000_NS {
+                let y = decimal_year(t_ns);
+                // Linear secular variation outside 2025–2030: ~0.15° of declination per year.
+                (
+                    y,
+                    (0.15f64 * MagneticModel::years_outside_validity(y)).to_radians(),
+                )
+            } else {
+                // Unknown date: mid-validity, with a few years' worth of declination change.
+                (2027.5, 1f64.to_radians())
+            };
+            self.mag_field = Some((MagneticModel::field(&origin, year), extra));
+        }
+        self.mag_field
+    }
+
+    pub(super) fn fuse_mag(&mut self, t_ns: i64, m_b: &Vector3<f64>) {
+        let Some((field, extra)) = self.model_field(t_ns) else {
+            return;
+        };
+        let Some(x) = self.x else { return };
+        let sigma = self.params.mag_heading_sigma_rad.hypot(extra);
+        if !self.yaw_aligned {
+            if !self.mag.check_alive(m_b)
+                || !self
+                    .mag
+                    .consistent(&x, m_b, &field, self.params.mag_max_inclination_error_rad)
+            {
+                return;
+            }
+            if let (Some(yaw), Some(xm)) = (
+                heading_from_field(&x, m_b, field.declination_rad()),
+                self.x.as_mut(),
+            ) {
+                set_yaw(xm, &mut self.p, yaw, sigma * 2.0);
+                self.yaw_aligned = true;
+                self.heading = HeadingSource::Magnetometer;
+                self.corrected = true;
+            }
+            return;
+        }
+        let dx = self.mag.fuse(
+            &x,
+            &mut self.p,
+            m_b,
+            &field,
+            sigma,
+            self.params.mag_max_inclination_error_rad,
+            self.params.gate_sigma,
+            t_ns,
+        );
+        self.inject(dx);
+    }
+}
