@@ -11,43 +11,7 @@ use common::test_config;
 use prost::Message;
 use uavnav_core::SensorEvent;
 use uavnav_proto::v1 as pb;
-use uavnav_runner::{RunnerParams, VehicleRunner};
 use uavnavd::Server;
-use uavnavd::runner_engine::pose_to_wire;
-
-/// The first `seconds` of the smoke flight with a magnetometer and a barometer
-/// (`scenarios/mag-baro.toml`: the smoke flight, same seed), every sensor, in time order.
-fn flight(seconds: f64) -> (uavnav_core::VehicleConfig, Vec<SensorEvent>) {
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../scenarios/mag-baro.toml"
-    ))
-    .unwrap();
-    let scenario = uavnav_sim::scenario::Scenario::from_toml_str(&text).unwrap();
-    let flight = uavnav_sim::flight::Flight::new(&scenario).unwrap();
-    let mut events = Vec::new();
-    let mut t_end = None;
-    for e in flight.events() {
-        let e = e.unwrap();
-        let end = *t_end.get_or_insert(e.t_ns() + (seconds * 1e9) as i64);
-        if e.t_ns() > end {
-            break;
-        }
-        events.push(e);
-    }
-    (flight.vehicle_config(), events)
-}
-
-fn offline(config: &uavnav_core::VehicleConfig, events: &[SensorEvent]) -> Vec<pb::PoseEstimate> {
-    let mut runner = VehicleRunner::new(config.clone(), RunnerParams::default(), None);
-    let mut poses = Vec::new();
-    for e in events {
-        if let Ok(p) = runner.push_inline(e.clone()) {
-            poses.extend(p.iter().map(pose_to_wire));
-        }
-    }
-    poses
-}
 
 fn envelope(id: &str, seq: u64, e: &SensorEvent) -> pb::SensorEnvelope {
     use pb::sensor_envelope::Payload as P;
@@ -95,8 +59,8 @@ fn assert_same(got: &[pb::PoseEstimate], want: &[pb::PoseEstimate]) {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn grpc_flight_equals_offline_estimate() {
-    let (config, events) = flight(4.0);
-    let want = offline(&config, &events);
+    let (config, events) = common::sim_flight("mag-baro", 4.0);
+    let want = common::offline_poses(&config, &events);
     assert!(
         want.len() > 500,
         "the offline run produced {} poses",
@@ -138,8 +102,8 @@ async fn grpc_flight_equals_offline_estimate() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn zenoh_flight_equals_offline_estimate() {
-    let (config, events) = flight(2.0);
-    let want = offline(&config, &events);
+    let (config, events) = common::sim_flight("mag-baro", 2.0);
+    let want = common::offline_poses(&config, &events);
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()

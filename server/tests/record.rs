@@ -13,42 +13,14 @@ use prost::Message;
 use uavnav_core::SensorEvent;
 use uavnav_dataset::mcap_io::reader::McapDataset;
 use uavnav_proto::v1 as pb;
-use uavnav_runner::{RunnerParams, VehicleRunner};
 use uavnavd::metrics::{RecordDrop, RecordDropLabels};
-use uavnavd::runner_engine::pose_to_wire;
 use uavnavd::{Config, RunningServer, Server};
 
-/// The first `seconds` of the smoke flight, every sensor, in time order.
-fn flight(seconds: f64) -> (uavnav_core::VehicleConfig, Vec<SensorEvent>) {
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../scenarios/smoke.toml"
-    ))
-    .unwrap();
-    let scenario = uavnav_sim::scenario::Scenario::from_toml_str(&text).unwrap();
-    let flight = uavnav_sim::flight::Flight::new(&scenario).unwrap();
-    let mut events = Vec::new();
-    let mut t_end = None;
-    for e in flight.events() {
-        let e = e.unwrap();
-        let end = *t_end.get_or_insert(e.t_ns() + (seconds * 1e9) as i64);
-        if e.t_ns() > end {
-            break;
-        }
-        events.push(e);
-    }
-    (flight.vehicle_config(), events)
-}
-
 fn offline(config: &uavnav_core::VehicleConfig, events: &[SensorEvent]) -> Vec<pb::PoseEstimate> {
-    let mut runner = VehicleRunner::new(config.clone(), RunnerParams::default(), None);
-    let mut poses = Vec::new();
-    for e in events {
-        if let Ok(p) = runner.push_inline(e.clone()) {
-            poses.extend(p.iter().map(pose_to_wire).map(strip));
-        }
-    }
-    poses
+    common::offline_poses(config, events)
+        .into_iter()
+        .map(strip)
+        .collect()
 }
 
 fn strip(mut p: pb::PoseEstimate) -> pb::PoseEstimate {
@@ -159,7 +131,7 @@ fn dropped(server: &RunningServer, reason: RecordDrop) -> u64 {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn recorded_flight_replays_to_the_recorded_poses() {
     let dir = tempfile::tempdir().unwrap();
-    let (config, events) = flight(3.0);
+    let (config, events) = common::sim_flight("smoke", 3.0);
     let want = offline(&config, &events);
     assert!(want.len() > 300, "{} offline poses", want.len());
 
@@ -200,7 +172,7 @@ async fn recorded_flight_replays_to_the_recorded_poses() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn rotation_by_size_and_retention() {
     let dir = tempfile::tempdir().unwrap();
-    let (config, events) = flight(3.0);
+    let (config, events) = common::sim_flight("smoke", 3.0);
     let want = offline(&config, &events);
     let mut cfg = record_config(dir.path());
     cfg.record.rotate_bytes = 20_000;
@@ -238,7 +210,7 @@ async fn rotation_by_size_and_retention() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_full_queue_drops_and_counts_instead_of_blocking() {
     let dir = tempfile::tempdir().unwrap();
-    let (config, events) = flight(1.0);
+    let (config, events) = common::sim_flight("smoke", 1.0);
     let want = offline(&config, &events);
     let mut cfg = record_config(dir.path());
     cfg.record.queue_bytes = 8;

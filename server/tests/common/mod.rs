@@ -364,3 +364,39 @@ pub async fn eventually<F: FnMut() -> bool>(timeout: Duration, mut f: F) -> bool
     }
     f()
 }
+
+/// The first `seconds` of a shipped scenario (`scenarios/{name}.toml`), every sensor, in time
+/// order, with its vehicle configuration.
+pub fn sim_flight(name: &str, seconds: f64) -> (VehicleConfig, Vec<SensorEvent>) {
+    let path = format!("{}/../scenarios/{name}.toml", env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(path).unwrap();
+    let scenario = uavnav_sim::scenario::Scenario::from_toml_str(&text).unwrap();
+    let flight = uavnav_sim::flight::Flight::new(&scenario).unwrap();
+    let mut events = Vec::new();
+    let mut t_end = None;
+    for e in flight.events() {
+        let e = e.unwrap();
+        let end = *t_end.get_or_insert(e.t_ns() + (seconds * 1e9) as i64);
+        if e.t_ns() > end {
+            break;
+        }
+        events.push(e);
+    }
+    (flight.vehicle_config(), events)
+}
+
+/// The offline estimate of `events` (the runner inline, as `uavnav estimate` runs it), as wire poses.
+pub fn offline_poses(config: &VehicleConfig, events: &[SensorEvent]) -> Vec<pb::PoseEstimate> {
+    let mut runner = uavnav_runner::VehicleRunner::new(
+        config.clone(),
+        uavnav_runner::RunnerParams::default(),
+        None,
+    );
+    let mut poses = Vec::new();
+    for e in events {
+        if let Ok(p) = runner.push_inline(e.clone()) {
+            poses.extend(p.iter().map(uavnavd::runner_engine::pose_to_wire));
+        }
+    }
+    poses
+}
