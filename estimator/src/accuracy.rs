@@ -233,10 +233,20 @@ impl AccuracyReport {
 
     /// One Markdown table row: label | roll | pitch | yaw RMSE (°) | outage drift % | within 3σ.
     pub fn markdown_row(&self) -> String {
-        let (r, p, y) =
-            self.att_rmse_deg
-                .map(|v| (v.x, v.y, v.z))
-                .unwrap_or((f64::NAN, f64::NAN, f64::NAN));
+        // A flight shorter than the settling time has nothing to score after it: a dash, not NaN
+        // or 0 %.
+        let (r, p, y, within) = match self.att_rmse_deg {
+            Some(v) => (
+                format!("{:.3}", v.x),
+                format!("{:.3}", v.y),
+                format!("{:.3}", v.z),
+                format!("{:.1} %", 100.0 * self.consistency.all_within_3sigma),
+            ),
+            None => {
+                let dash = || "–".to_string();
+                (dash(), dash(), dash(), dash())
+            }
+        };
         let drift = self
             .outages
             .iter()
@@ -244,17 +254,13 @@ impl AccuracyReport {
             .collect::<Vec<_>>()
             .join(", ");
         format!(
-            "| {} | {:.3} | {:.3} | {:.3} | {} | {:.1} % |",
+            "| {} | {r} | {p} | {y} | {} | {within} |",
             self.label,
-            r,
-            p,
-            y,
             if drift.is_empty() {
                 "–".into()
             } else {
                 drift
             },
-            100.0 * self.consistency.all_within_3sigma
         )
     }
 
