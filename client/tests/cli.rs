@@ -267,7 +267,7 @@ async fn replay_and_watch_end_to_end() {
     let header = lines.next().unwrap();
     assert_eq!(
         header,
-        format!("{},vehicle_id", uavnav_estimator::format::csv_header())
+        format!("{},vehicle_id", uavnav_dataset::poses::csv_header())
     );
     let rows: Vec<&str> = lines.collect();
     let ncol = header.split(',').count();

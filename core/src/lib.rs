@@ -11,7 +11,8 @@
 //! | [`rotation`] | ZYX Euler angles, skew matrices, small-angle helpers |
 //! | [`rng`] | a seeded, version-stable random generator (xoshiro256**) with Gaussian draws |
 //! | [`egomotion`] | the camera relative-motion measurement shared by vision and estimator |
-//! | [`truth`] | ground-truth state samples (the EuRoC `state_groundtruth_estimate0` row) |
+//! | [`truth`] | ground-truth state samples (the EuRoC `state_groundtruth_estimate0` row) and their interpolation |
+//! | [`output`] | the estimator's output vocabulary: [`PoseOutput`], [`AidingFlags`], [`Mode`], [`PoseHealth`] |
 //!
 //! Conventions (project-wide): SI units; time is integer nanoseconds (`i64`, `t_ns`); world frame =
 //! local NED; body = FRD = IMU frame; camera = OpenCV (x right, y down, z optical axis); quaternions
@@ -23,6 +24,7 @@ pub mod egomotion;
 pub mod geodesy;
 pub mod geoid;
 pub mod magnetic;
+pub mod output;
 pub mod rng;
 pub mod rotation;
 pub mod sensors;
@@ -35,6 +37,7 @@ pub use config::{
 };
 pub use egomotion::{Egomotion, EgomotionSolver, MotionPrior};
 pub use geodesy::{Lla, LocalFrame};
+pub use output::{AidingFlags, Mode, PoseHealth, PoseOutput, SourceSummary};
 pub use sensors::{
     BaroSample, CameraFrame, FixType, GnssFix, GnssVelocity, ImageFormat, ImuSample, MagSample,
     SensorEvent,

@@ -29,6 +29,13 @@ pub fn wrap_pi(a: f64) -> f64 {
     x
 }
 
+/// Roll, pitch, yaw error (estimate − truth), wrapped, rad.
+pub fn euler_error(est: &UnitQuaternion<f64>, truth: &UnitQuaternion<f64>) -> Vector3<f64> {
+    let (r1, p1, y1) = est.euler_angles();
+    let (r0, p0, y0) = truth.euler_angles();
+    Vector3::new(wrap_pi(r1 - r0), wrap_pi(p1 - p0), wrap_pi(y1 - y0))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -16,6 +16,7 @@
 //! | [`mcap_io`] | topics and times ([`mcap_io`] doc), [`McapWriter`], [`mcap_io::reader::McapDataset`], fleet [`mcap_io::reader::McapEvents`] |
 //! | [`convert`] | [`convert::convert`] (by extension), [`convert::asl_to_mcap`], [`convert::mcap_to_asl`] |
 //! | [`flight_log`] | a `uavnav_logs::FlightLog` as a dataset ([`flight_log::LogDataset`]) |
+//! | [`poses`] | pose outputs as `poses.csv` rows and TUM lines |
 //! | [`error`] | [`DatasetError`]: every error names the file, and the line where there is one |
 //! | [`yaml`], [`csv`], [`merge`] | the `sensor.yaml` subset parser, the streaming `data.csv` reader, the k-way time merge |
 //!
@@ -36,6 +37,7 @@ pub mod error;
 pub mod flight_log;
 pub mod mcap_io;
 pub mod merge;
+pub mod poses;
 pub mod yaml;
 
 use std::path::{Path, PathBuf};

@@ -12,7 +12,7 @@ mod common;
 
 use common::{Oracle, RunCfg, outages_ns, run, scenario};
 use uavnav_core::FilterProfile;
-use uavnav_estimator::accuracy::AccuracyReport;
+use uavnav_report::accuracy::AccuracyReport;
 use uavnav_sim::Flight;
 
 fn main() {

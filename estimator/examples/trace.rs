@@ -8,7 +8,8 @@ mod common;
 
 use common::{Oracle, RunCfg, run, scenario};
 use uavnav_core::FilterProfile;
-use uavnav_estimator::accuracy::{euler_error, truth_at};
+use uavnav_core::rotation::euler_error;
+use uavnav_core::truth::truth_at;
 use uavnav_sim::Flight;
 
 fn main() {

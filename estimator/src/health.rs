@@ -1,37 +1,11 @@
 //! Filter health: [`Health`], the full snapshot (mode, per-source innovation diagnostics with test
 //! ratios, rejection counts, the covariance diagonal) that `Estimator::health` returns, and
-//! [`PoseHealth`], its summary carried by every output (never logged).
+//! [`PoseHealth`], its summary carried by every output (never logged; defined in
+//! `uavnav_core::output` with [`Mode`], as are the conversions from the snapshot here).
+
+pub use uavnav_core::output::{Mode, PoseHealth, SourceSummary};
 
 use crate::aid_sources::InnovDiag;
-
-/// What the filter is currently running on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
-pub enum Mode {
-    /// Waiting for enough data to align.
-    #[default]
-    Initialising,
-    /// GNSS fused recently.
-    Nominal,
-    /// No recent GNSS; vision carries the solution.
-    GnssDeniedVision,
-    /// No recent aiding at all: inertial coasting.
-    InertialOnly,
-    /// Non-finite state or covariance beyond the divergence bounds.
-    Diverged,
-}
-
-impl Mode {
-    /// Name for CSV columns and logs.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Mode::Initialising => "initialising",
-            Mode::Nominal => "nominal",
-            Mode::GnssDeniedVision => "gnss_denied_vision",
-            Mode::InertialOnly => "inertial_only",
-            Mode::Diverged => "diverged",
-        }
-    }
-}
 
 /// Health of the estimator: the full snapshot.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -89,17 +63,6 @@ impl Default for Health {
     }
 }
 
-/// One aiding source at one output: what [`InnovDiag`] counts, without the innovation vectors.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct SourceSummary {
-    /// Latest test ratio (normalised innovation squared over the gate; > 1 = rejected).
-    pub test_ratio: f64,
-    /// Measurements fused so far.
-    pub fused: u64,
-    /// Measurements rejected by the gate so far.
-    pub rejected: u64,
-}
-
 impl From<&InnovDiag> for SourceSummary {
     fn from(d: &InnovDiag) -> Self {
         Self {
@@ -108,35 +71,6 @@ impl From<&InnovDiag> for SourceSummary {
             rejected: d.rejected,
         }
     }
-}
-
-/// Health at one output: the mode, the counters and each source's summary. Every IMU sample gives
-/// an output, so this stays small (about a fifth of [`Health`]: no innovation vectors, no covariance
-/// diagonal); the full snapshot is `Estimator::health`.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct PoseHealth {
-    /// Current mode.
-    pub mode: Mode,
-    /// GNSS position.
-    pub gnss_pos: SourceSummary,
-    /// GNSS velocity.
-    pub gnss_vel: SourceSummary,
-    /// Vision relative rotation (paper profile: the pseudo-attitude).
-    pub vision_rot: SourceSummary,
-    /// Vision translation (direction / metric; paper: eq. 35 velocity).
-    pub vision_trans: SourceSummary,
-    /// Magnetometer heading.
-    pub mag: SourceSummary,
-    /// Barometric height.
-    pub baro: SourceSummary,
-    /// Inputs refused by validation (NaN, time going backwards, …).
-    pub inputs_rejected: u64,
-    /// Measurements that arrived behind the fusion horizon and were dropped.
-    pub late_dropped: u64,
-    /// Vision measurements dropped for lack of a clone at their frame-0 time.
-    pub vision_no_clone: u64,
-    /// GNSS inflate-and-fuse resets.
-    pub gnss_resets: u32,
 }
 
 impl From<&Health> for PoseHealth {

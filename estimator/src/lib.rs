@@ -19,18 +19,14 @@
 //! | [`init`] | alignment without operator input |
 //! | [`yaw_estimator`] | heading without a magnetometer: a Gaussian sum of yaw hypotheses fed by GNSS velocity |
 //! | [`motion_prior`] | the prior handed to the vision front end |
-//! | [`health`] | [`Health`] (full snapshot), [`PoseHealth`] (with every output) and [`Mode`] |
-//! | [`output`] | [`PoseOutput`], [`AidingFlags`], Euler σ and eq. (31)'s `J` |
+//! | [`health`] | [`Health`] (full snapshot) and its summary [`PoseHealth`] (with every output; defined in `uavnav_core::output` with [`Mode`]) |
+//! | [`output`] | Euler σ and eq. (31)'s `J`, the geodetic linearizer ([`PoseOutput`] and [`AidingFlags`] are `uavnav_core::output`'s) |
 //! | [`paper`] | the paper's GPS-IMU, VIDEO-IMU(1) and VIDEO-IMU(2) filters |
-//! | [`format`] | CSV and TUM line formatters for the CLI |
-//! | [`accuracy`] | attitude RMSE, outage drift, 3σ consistency against truth |
 
-pub mod accuracy;
 pub mod aid_sources;
 pub mod buffer;
 pub mod eskf;
 pub mod estimator;
-pub mod format;
 pub mod health;
 pub mod init;
 pub mod motion_prior;

@@ -1,53 +1,10 @@
-//! The estimator's per-IMU-sample output.
+//! The estimator's per-IMU-sample output: the vocabulary ([`PoseOutput`], [`AidingFlags`]) is
+//! `uavnav_core::output`'s; here are the helpers that fill it (Euler σ, eq. (31)'s `J`, the cheap
+//! geodetic conversion).
 
 use nalgebra::{UnitQuaternion, Vector3};
 use uavnav_core::Lla;
-
-use crate::health::PoseHealth;
-
-/// Which aiding sources contributed recently (within the aid timeout).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
-pub struct AidingFlags {
-    /// GNSS position fused recently.
-    pub gnss_pos: bool,
-    /// GNSS velocity fused recently.
-    pub gnss_vel: bool,
-    /// Vision rotation fused recently.
-    pub vision_rot: bool,
-    /// Vision translation fused recently.
-    pub vision_trans: bool,
-}
-
-/// One pose estimate, at an IMU sample time.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PoseOutput {
-    /// Time, ns (the IMU sample's).
-    pub t_ns: i64,
-    /// Geodetic position of the body (IMU) origin.
-    pub lla: Lla,
-    /// Position in the local NED frame, m.
-    pub pos_ned_m: Vector3<f64>,
-    /// Velocity, NED, m/s.
-    pub vel_ned_mps: Vector3<f64>,
-    /// Rotation of body vectors into NED.
-    pub nav_from_body: UnitQuaternion<f64>,
-    /// Roll, pitch, yaw (ZYX), rad.
-    pub euler_rad: Vector3<f64>,
-    /// 1-σ position, NED, m.
-    pub sigma_pos_ned_m: Vector3<f64>,
-    /// 1-σ velocity, NED, m/s.
-    pub sigma_vel_mps: Vector3<f64>,
-    /// 1-σ roll, pitch, yaw, rad.
-    pub sigma_att_rad: Vector3<f64>,
-    /// Estimated gyro bias, rad/s (zero for the paper profile).
-    pub gyro_bias_radps: Vector3<f64>,
-    /// Estimated accelerometer bias, m/s² (zero for the paper profile).
-    pub accel_bias_mps2: Vector3<f64>,
-    /// Filter health at this output (the full snapshot: `Estimator::health`).
-    pub health: PoseHealth,
-    /// Recently fused sources.
-    pub aiding: AidingFlags,
-}
+pub use uavnav_core::output::{AidingFlags, PoseOutput};
 
 /// The paper's eq. (31) matrix `J(φ, θ)`: ZYX Euler-angle rates from body angular rates,
 /// `[φ̇ θ̇ ψ̇]ᵀ = J ω_nb^b`. Singular at θ = ±90°.

@@ -7,10 +7,11 @@ mod common;
 use common::{Oracle, RunCfg, run, scenario, synth_egomotion};
 use nalgebra::{UnitQuaternion, Vector3};
 use uavnav_core::rng::Rng;
+use uavnav_core::rotation::euler_error;
+use uavnav_core::truth::truth_at;
 use uavnav_core::{
     FilterProfile, FixType, GnssConfig, GnssFix, ImuSample, Lla, LocalFrame, VehicleConfig,
 };
-use uavnav_estimator::accuracy::{euler_error, truth_at};
 use uavnav_estimator::{Estimator, EstimatorParams, InputError, Mode};
 use uavnav_sim::Flight;
 

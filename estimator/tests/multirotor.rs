@@ -6,7 +6,7 @@
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use uavnav_core::rotation::wrap_pi;
-use uavnav_estimator::accuracy::truth_at;
+use uavnav_core::truth::truth_at;
 use uavnav_estimator::eskf::HeadingSource;
 use uavnav_estimator::{Estimator, EstimatorParams, PoseOutput};
 use uavnav_sim::{Flight, Scenario};

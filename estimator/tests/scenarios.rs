@@ -7,7 +7,7 @@ mod common;
 
 use common::{Oracle, RunCfg, outages_ns, run, scenario};
 use uavnav_core::FilterProfile;
-use uavnav_estimator::accuracy::AccuracyReport;
+use uavnav_report::accuracy::AccuracyReport;
 use uavnav_sim::Flight;
 
 fn report(name: &str, cfg: &RunCfg) -> AccuracyReport {
@@ -166,7 +166,7 @@ fn gnss_recovery_after_the_outage_moves_no_more_than_the_stated_uncertainty() {
         "a correction step of {worst:.2} σ at GNSS recovery"
     );
     let after = outs.iter().find(|o| o.t_ns > end + 8_000_000_000).unwrap();
-    let t = uavnav_estimator::accuracy::truth_at(flight.truth(), after.t_ns).unwrap();
+    let t = uavnav_core::truth::truth_at(flight.truth(), after.t_ns).unwrap();
     assert!(
         (after.pos_ned_m - t.pos_ned_m).xy().norm() < 5.0,
         "not recovered 8 s after the outage"

@@ -9,6 +9,7 @@
 //! | [`v1::uav_nav_server`], [`v1::uav_nav_client`] | the tonic server trait / client of service `uavnav.v1.UavNav` |
 //! | [`FILE_DESCRIPTOR_SET`] | encoded `FileDescriptorSet` of all schemas (gRPC reflection, MCAP schemas) |
 //! | [`convert`] | `TryFrom<&wire>` for core types (validating; [`ConvertError`] names the field) and `From<&core>` for wire types |
+//! | [`compact`] | the compact pose the service carries from an actor to its senders ([`compact::Pose`], [`compact::PoseBatch`]) |
 //! | [`foxglove_conv`] | GNSS fix → `foxglove.LocationFix`, pose → `foxglove.PoseInFrame`, timestamps |
 //!
 //! Schemas live in `proto/uavnav/v1/*.proto` (common, sensors, config, outputs, service); every
@@ -31,6 +32,7 @@
 //! SI units; `int64 t_ns` nanoseconds on the vehicle's sensor clock; local NED world frame; body =
 //! FRD = IMU; camera = OpenCV; quaternions Hamilton, w first; `a_from_b` maps `b` into `a`.
 
+pub mod compact;
 pub mod convert;
 pub mod foxglove_conv;
 

@@ -3,10 +3,11 @@
 //! position with a zoom on the outage), plus attitude and horizontal-position errors.
 
 use plotters::style::RGBColor;
+use uavnav_core::Mode;
 use uavnav_core::TruthSample;
 use uavnav_core::rotation::euler_zyx;
-use uavnav_estimator::Mode;
-use uavnav_estimator::accuracy::{SETTLE_NS, euler_error, truth_at};
+
+use crate::accuracy::{SETTLE_NS, euler_error, truth_at};
 
 use crate::Run;
 use crate::plot::{Line, Panel, TRUTH_COLOR, run_color};

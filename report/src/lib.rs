@@ -20,6 +20,7 @@
 //!
 //! | module | what it holds |
 //! |---|---|
+//! | [`accuracy`] | attitude RMSE, outage drift, 3σ consistency: [`accuracy::AccuracyReport`] |
 //! | [`outages`] | [`gnss_outages`]: outage windows derived from the GNSS fix times |
 //! | [`tables`] | `accuracy.json` and `accuracy.md` |
 //! | [`figures`] | plot-ready series and the panels of each figure |
@@ -27,6 +28,7 @@
 //! | [`series`] | time base, yaw unwrapping, decimation, axis ranges, clipping |
 //! | [`error`] | [`ReportError`] |
 
+pub mod accuracy;
 pub mod error;
 pub mod figures;
 pub mod outages;
@@ -36,9 +38,10 @@ pub mod tables;
 
 use std::path::{Path, PathBuf};
 
+use uavnav_core::PoseOutput;
 use uavnav_core::TruthSample;
-use uavnav_estimator::PoseOutput;
-use uavnav_estimator::accuracy::AccuracyReport;
+
+use crate::accuracy::AccuracyReport;
 
 pub use error::ReportError;
 pub use outages::{DEFAULT_MIN_GAP_NS, gnss_outages};

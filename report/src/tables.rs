@@ -2,8 +2,9 @@
 //! plus run metadata) and `accuracy.md`.
 
 use serde_json::{Map, Value, json};
-use uavnav_estimator::accuracy::{AccuracyReport, SETTLE_NS};
-use uavnav_estimator::{Mode, PoseOutput};
+use uavnav_core::{Mode, PoseOutput};
+
+use crate::accuracy::{AccuracyReport, SETTLE_NS};
 
 use crate::error::ReportError;
 

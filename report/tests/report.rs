@@ -8,7 +8,7 @@ use std::path::Path;
 use nalgebra::Vector3;
 use uavnav_core::rotation::{euler_zyx, from_euler_zyx};
 use uavnav_core::{Lla, TruthSample};
-use uavnav_estimator::{Mode, PoseHealth, PoseOutput};
+use uavnav_core::{Mode, PoseHealth, PoseOutput};
 use uavnav_report::{DEFAULT_MIN_GAP_NS, ReportError, Run, gnss_outages, write_report};
 
 const S: i64 = 1_000_000_000;

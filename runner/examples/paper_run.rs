@@ -38,7 +38,7 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use uavnav_core::{
     CameraFrame, Egomotion, FilterProfile, ImageFormat, LocalFrame, SensorEvent, TruthSample,
 };
-use uavnav_estimator::accuracy::{AccuracyReport, truth_at};
+use uavnav_report::accuracy::{AccuracyReport, truth_at};
 use uavnav_runner::{PoseOutput, RunnerParams, VehicleRunner};
 use uavnav_sim::{Flight, Scenario};
 use uavnav_vision::{NoMeasurement, PairError, error_stats, pair_error};

@@ -6,8 +6,8 @@
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use nalgebra::{UnitQuaternion, Vector3, Vector6};
+use uavnav_core::truth::truth_at;
 use uavnav_core::{SensorEvent, TruthSample};
-use uavnav_estimator::accuracy::truth_at;
 use uavnav_runner::{RunnerParams, VehicleRunner};
 use uavnav_sim::{Flight, Scenario};
 

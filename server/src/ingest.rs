@@ -88,7 +88,7 @@ pub struct Ingestor {
     limits: ImageLimits,
     max_message_bytes: usize,
     /// The Foxglove live view, shown every accepted GNSS fix and camera frame.
-    live: Option<crate::live::LiveTap>,
+    live: Option<uavnav_liveview::LiveTap>,
     /// The recorder, handed every accepted input.
     record: Option<crate::record::RecordTap>,
 }
@@ -112,7 +112,7 @@ impl Ingestor {
     }
 
     /// Shows accepted GNSS fixes and camera frames on a live view.
-    pub fn with_live_view(mut self, tap: crate::live::LiveTap) -> Self {
+    pub fn with_live_view(mut self, tap: uavnav_liveview::LiveTap) -> Self {
         self.live = Some(tap);
         self
     }
@@ -263,7 +263,7 @@ impl Ingestor {
         id: &str,
         input: Input,
         payload: Payload<'_>,
-        show: impl FnOnce(&crate::live::LiveTap),
+        show: impl FnOnce(&uavnav_liveview::LiveTap),
     ) -> Result<Verdict, Rejection> {
         let kind = input.kind();
         let h = self.vehicle(id)?;

@@ -19,7 +19,7 @@
 //! | [`grpc`] | the tonic `uavnav.v1.UavNav` service |
 //! | [`zenoh_io`] | the embedded Zenoh session: inputs, outputs, queryables, liveliness |
 //! | [`hub`] | broadcast fan-out of poses and health |
-//! | [`live`] | the Foxglove live view (WebSocket): pose, path, GNSS fix and camera per vehicle |
+//! | (crate `uavnav-liveview`) | the Foxglove live view (WebSocket): pose, path, GNSS fix and camera per vehicle |
 //! | [`health`] | per-vehicle health reports |
 //! | [`metrics`] | Prometheus metrics |
 //! | [`record`] | recording of accepted inputs and poses to rotating MCAP files |
@@ -35,7 +35,6 @@ pub mod health;
 pub mod http;
 pub mod hub;
 pub mod ingest;
-pub mod live;
 pub mod logging;
 pub mod metrics;
 pub mod record;

@@ -2,8 +2,10 @@
 //! engine seam, and the conversion of its outputs to the wire messages.
 
 use uavnav_core::{SensorEvent, VehicleConfig};
+use uavnav_proto::compact::compact_pose;
+use uavnav_proto::convert::output::mode_to_wire;
 use uavnav_proto::v1 as pb;
-use uavnav_runner::{Health, Mode, PoseOutput, RunnerParams, Step, VehicleRunner, VisionDone};
+use uavnav_runner::{Health, PoseOutput, RunnerParams, Step, VehicleRunner, VisionDone};
 
 use crate::engine::{
     Engine, EngineError, EngineFactory, EngineHealth, EngineStep, VisionResult, VisionWork,
@@ -158,45 +160,9 @@ fn innovation(h: &Health) -> pb::InnovationRatios {
     }
 }
 
-/// Estimator mode → wire.
-pub fn mode_to_wire(m: Mode) -> pb::EstimatorMode {
-    match m {
-        Mode::Initialising => pb::EstimatorMode::Initialising,
-        Mode::Nominal => pb::EstimatorMode::Nominal,
-        Mode::GnssDeniedVision => pb::EstimatorMode::GnssDeniedVision,
-        Mode::InertialOnly => pb::EstimatorMode::InertialOnly,
-        Mode::Diverged => pb::EstimatorMode::Diverged,
-    }
-}
-
-/// Estimator pose → the service's pose (`ingest_wall_ns` unset).
+/// Estimator pose → the service's compact pose (`uavnav_proto::compact::compact_pose`).
 pub fn pose_of(p: &PoseOutput) -> Pose {
-    let bit = Pose::aiding_bit;
-    let mut aiding = 0;
-    if p.aiding.gnss_pos {
-        aiding |= bit(pb::AidingSource::GnssPosition);
-    }
-    if p.aiding.gnss_vel {
-        aiding |= bit(pb::AidingSource::GnssVelocity);
-    }
-    if p.aiding.vision_rot || p.aiding.vision_trans {
-        aiding |= bit(pb::AidingSource::Vision);
-    }
-    Pose {
-        t_ns: p.t_ns,
-        position: Some((&p.lla).into()),
-        vel_ned_mps: Some((&p.vel_ned_mps).into()),
-        nav_from_body: Some((&p.nav_from_body).into()),
-        roll_rad: p.euler_rad.x,
-        pitch_rad: p.euler_rad.y,
-        yaw_rad: p.euler_rad.z,
-        sigma_pos_ned_m: Some((&p.sigma_pos_ned_m).into()),
-        sigma_vel_ned_mps: Some((&p.sigma_vel_mps).into()),
-        sigma_att_rad: Some((&p.sigma_att_rad).into()),
-        aiding,
-        mode: mode_to_wire(p.health.mode),
-        ingest_wall_ns: 0,
-    }
+    compact_pose(p)
 }
 
 /// Estimator pose → wire (without `vehicle_id` and `ingest_wall_ns`).

@@ -21,13 +21,13 @@ use crate::grpc::{UavNavService, remap_transport_status};
 use crate::http::{HttpState, router};
 use crate::hub::Hub;
 use crate::ingest::Ingestor;
-use crate::live::{LiveTap, LiveView};
 use crate::metrics::Metrics;
 use crate::record::Recorder;
 use crate::registry::Registry;
 use crate::validate::ImageLimits;
 use crate::vision_pool::VisionPool;
 use crate::zenoh_io::ZenohIo;
+use uavnav_liveview::{LiveTap, LiveView};
 
 /// How long the gRPC and HTTP servers get to finish in-flight calls at shutdown.
 const SERVE_DRAIN: Duration = Duration::from_secs(5);
@@ -98,7 +98,11 @@ impl Server {
         };
         let live = match &config.foxglove.addr {
             Some(addr) => {
-                let view = LiveView::start(addr, metrics.foxglove_dropped.clone()).await?;
+                let dropped = metrics.foxglove_dropped.clone();
+                let on_drop = std::sync::Arc::new(move |n: u64| {
+                    dropped.inc_by(n);
+                });
+                let view = LiveView::start(addr, on_drop).await?;
                 ingestor = ingestor.with_live_view(view.tap());
                 tokio::spawn(forward_poses(hub.clone(), view.tap()));
                 info!(port = view.port(), "Foxglove live view serving");

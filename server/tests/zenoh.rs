@@ -13,13 +13,7 @@ use prost::Message;
 use uavnav_proto::v1 as pb;
 use zenoh::Wait;
 
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
+use uavnav_tests::net::free_port;
 
 async fn peer(connect: &str) -> zenoh::Session {
     let mut c = zenoh::Config::default();

@@ -1,7 +1,16 @@
 //! The workspace's test support and test map.
 //!
-//! Support: [`shared_data`] finds the shared real data beside the workspace (or says why a test
-//! skips). Map:
+//! Support (a dev-dependency of the crates whose tests use it; it depends on core, proto and sim,
+//! never on the service, so the service's own tests can use it without a dependency cycle):
+//!
+//! | item | what it gives |
+//! |---|---|
+//! | [`shared_data`] | the shared real data beside the workspace, or why a test skips |
+//! | [`wire`] | wire-message builders: IMU, GNSS, magnetometer, barometer samples, envelopes, a vehicle configuration, a minimal JPEG header |
+//! | [`net`] | a free loopback port, `eventually` (poll a condition with a timeout) |
+//! | [`flight`] | a shipped scenario's first seconds as sensor events with its vehicle configuration |
+//!
+//! Map:
 //!
 //! End-to-end tests sit next to the crate they exercise, so each runs against that crate's public
 //! API and `cargo test --workspace` runs them all:
@@ -17,7 +26,13 @@
 //!   crates' scenario, property, Jacobian, golden and real-data tests;
 //! - `docker/test.sh`: the compose deployment (run by `.ci/run` when a Docker engine is present).
 
+pub mod flight;
+pub mod net;
+pub mod wire;
+
 use std::path::PathBuf;
+
+pub use uavnav_proto::v1 as pb;
 
 /// `<workspace>/../shared/data/<sub>`, when present. A user's clone has no `../shared`: the
 /// caller's test then skips, and this says so on stderr with the path it looked for.

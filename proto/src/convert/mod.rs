@@ -9,9 +9,11 @@
 //! | [`sensors`] | `ImuSample`, `ImuBatch` ↔ `Vec<ImuSample>`, `GnssFix`, `CameraFrame`, `SensorEvent` |
 //! | [`config`] | `VehicleConfig`, `ImuConfig`, `GnssConfig`, `CameraConfig`, `CameraModel` |
 //! | [`geometry`] | `Vector3`, `Quaternion`, `RigidTransform`, `GeodeticPosition` ↔ `Lla`, `TruthSample` |
+//! | [`output`] | `PoseEstimate` ↔ `PoseOutput` (every field), `EstimatorMode` ↔ `Mode`, aiding sources ↔ `AidingFlags`, `PoseHealthSummary` ↔ `PoseHealth` |
 
 pub mod config;
 pub mod geometry;
+pub mod output;
 pub mod sensors;
 
 use std::fmt;

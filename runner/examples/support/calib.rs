@@ -9,8 +9,9 @@
 
 use nalgebra::{Matrix3, Matrix6, SMatrix, SymmetricEigen, Vector3, Vector6};
 use uavnav_core::TruthSample;
+use uavnav_core::rotation::euler_error;
+use uavnav_core::truth::truth_at;
 use uavnav_estimator::PoseOutput;
-use uavnav_estimator::accuracy::{euler_error, truth_at};
 use uavnav_estimator::aid_sources::chi2_gate;
 
 /// Accumulates `(whitened error)²` per eigen-direction of the joint 6×6 covariance and the

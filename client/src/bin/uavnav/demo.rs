@@ -14,7 +14,7 @@ use anyhow::Context;
 use nalgebra::Vector3;
 use uavnav_client::{Client, Selector, pb, posefmt, schedule};
 use uavnav_core::{LocalFrame, SensorEvent, TruthSample};
-use uavnav_estimator::accuracy::{attitude_rmse, truth_at};
+use uavnav_report::accuracy::{attitude_rmse, truth_at};
 use uavnav_runner::{PoseOutput, RunnerParams, VehicleRunner};
 use uavnav_sim::{Flight, Scenario};
 use uavnavd::runner_engine::pose_to_wire;

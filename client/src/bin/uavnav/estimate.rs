@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use uavnav_core::{FilterProfile, SensorEvent, TruthSample};
-use uavnav_estimator::format::{csv_header, csv_row, tum_line};
+use uavnav_dataset::poses::{csv_header, csv_row, tum_line};
 use uavnav_runner::{PoseOutput, RunnerParams, VehicleRunner};
 
 use crate::common::{CliError, CliResult};

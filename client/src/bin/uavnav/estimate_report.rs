@@ -119,7 +119,7 @@ pub fn write(dir: &Path, args: &Args, out: &RunOutput, against: &Comparison) -> 
     println!("Scored against: {}", against.name);
     println!(
         "{}",
-        uavnav_estimator::accuracy::AccuracyReport::markdown_header()
+        uavnav_report::accuracy::AccuracyReport::markdown_header()
     );
     for r in &summary.reports {
         println!("{}", r.markdown_row());

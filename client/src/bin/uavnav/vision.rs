@@ -6,8 +6,8 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+use uavnav_core::truth::truth_at;
 use uavnav_core::{MotionPrior, SensorEvent, TruthSample};
-use uavnav_estimator::accuracy::truth_at;
 use uavnav_estimator::{Estimator, EstimatorParams};
 use uavnav_vision::{
     CSV_HEADER, FrontEnd, Method, PairError, VisionParams, csv_row, error_stats, pair_error,

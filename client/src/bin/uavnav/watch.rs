@@ -20,7 +20,7 @@ use anyhow::Context;
 use uavnav_client::keys::Leaf;
 use uavnav_client::{Selector, pb, posefmt};
 use uavnav_core::LocalFrame;
-use uavnavd::live::{LiveTap, LiveView};
+use uavnav_liveview::{LiveTap, LiveView};
 
 use crate::common::{CliError, CliResult};
 
@@ -253,7 +253,7 @@ async fn start_live_view(
     client: &uavnav_client::Client,
     sel: &Selector,
 ) -> Result<LiveView, CliError> {
-    let view = LiveView::start(addr, Default::default())
+    let view = LiveView::start(addr, std::sync::Arc::new(|_| {}))
         .await
         .map_err(|e| CliError::runtime(anyhow::anyhow!("--foxglove: {e}")))?;
     eprintln!(

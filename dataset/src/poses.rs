@@ -1,6 +1,7 @@
-//! Pure line formatters for the CLI: the `poses.csv` row and the TUM trajectory line.
+//! Pose output files: the `poses.csv` row (the columns of `uavnav estimate` and `watch`) and the
+//! TUM trajectory line, as pure line formatters.
 
-use crate::output::PoseOutput;
+use uavnav_core::PoseOutput;
 
 /// The mandatory leading columns of `poses.csv`, in order.
 pub const CSV_LEADING_COLUMNS: &str = "timestamp_ns,latitude_deg,longitude_deg,altitude_m,v_north_mps,v_east_mps,v_down_mps,qw,qx,qy,qz,roll_deg,pitch_deg,yaw_deg,sigma_north_m,sigma_east_m,sigma_down_m,sigma_roll_deg,sigma_pitch_deg,sigma_yaw_deg";

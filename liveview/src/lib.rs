@@ -1,3 +1,5 @@
+//! # uavnav-liveview
+//!
 //! Foxglove live view: a Foxglove WebSocket server (the `foxglove` crate's) that shows each
 //! vehicle's pose, path, GNSS fix, magnetometer vector and camera image while they stream (the
 //! barometer is not shown: Foxglove has no schema for a scalar pressure, and a Plot panel of the
@@ -22,18 +24,22 @@
 //!
 //! The view is a task that owns the scene; [`LiveTap`] is the cloneable, non-blocking handle the
 //! ingest path and the watchers use. When the view falls behind, messages are dropped (never the
-//! estimation) and counted in [`LiveTap::dropped`].
+//! estimation) and counted in [`LiveTap::dropped`] and by the owner's `on_drop` callback (the
+//! service's `uavnav_foxglove_dropped_total`).
+//!
+//! This crate is the only one of the workspace that compiles the `foxglove` WebSocket server.
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use foxglove::messages::{
     CompressedImage, LocationFix, Pose, PoseInFrame, PosesInFrame, Vector3 as FoxVector3,
 };
 use foxglove::{Channel, Context, WebSocketServer, WebSocketServerHandle};
-use prometheus_client::metrics::counter::Counter;
 use tokio::sync::mpsc;
 use uavnav_core::{Lla, LocalFrame};
+use uavnav_proto::compact::{Pose as CompactPose, PoseBatch};
 use uavnav_proto::foxglove_conv;
 use uavnav_proto::v1 as pb;
 
@@ -63,36 +69,48 @@ pub enum LiveError {
 /// What the view shows next.
 #[derive(Debug)]
 enum LiveMsg {
-    Poses(Arc<crate::hub::PoseBatch>),
+    Poses(Arc<PoseBatch>),
     Gnss(Arc<str>, pb::GnssFix),
     Mag(Arc<str>, pb::MagSample),
     Camera(Arc<str>, pb::CameraFrame),
 }
 
+/// Called with the number of messages just dropped (e.g. to count them in a metric).
+pub type OnDrop = Arc<dyn Fn(u64) + Send + Sync>;
+
 /// The cloneable handle producers use: every call is a non-blocking send.
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct LiveTap {
     tx: mpsc::Sender<LiveMsg>,
-    dropped: Counter,
+    dropped: Arc<AtomicU64>,
+    on_drop: OnDrop,
+}
+
+impl std::fmt::Debug for LiveTap {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LiveTap")
+            .field("dropped", &self.dropped())
+            .finish_non_exhaustive()
+    }
 }
 
 impl LiveTap {
     fn send(&self, m: LiveMsg) {
         if self.tx.try_send(m).is_err() {
-            self.dropped.inc();
+            self.count_dropped(1);
         }
     }
 
     /// Shows one pose estimate (a complete wire message, `vehicle_id` set).
     pub fn pose(&self, p: pb::PoseEstimate) {
-        self.poses(Arc::new(crate::hub::PoseBatch {
+        self.poses(Arc::new(PoseBatch {
             vehicle_id: p.vehicle_id.as_str().into(),
-            poses: vec![crate::hub::Pose::from_wire(&p)],
+            poses: vec![CompactPose::from_wire(&p)],
         }));
     }
 
     /// Shows a batch of pose estimates.
-    pub fn poses(&self, b: Arc<crate::hub::PoseBatch>) {
+    pub fn poses(&self, b: Arc<PoseBatch>) {
         self.send(LiveMsg::Poses(b));
     }
 
@@ -113,12 +131,13 @@ impl LiveTap {
 
     /// Counts `n` messages lost before they reached the tap (e.g. a lagging pose feed).
     pub fn count_dropped(&self, n: u64) {
-        self.dropped.inc_by(n);
+        self.dropped.fetch_add(n, Ordering::Relaxed);
+        (self.on_drop)(n);
     }
 
     /// Messages dropped because the view was behind (or stopped).
     pub fn dropped(&self) -> u64 {
-        self.dropped.get()
+        self.dropped.load(Ordering::Relaxed)
     }
 }
 
@@ -139,9 +158,9 @@ impl std::fmt::Debug for LiveView {
 
 impl LiveView {
     /// Starts the WebSocket server on `addr` (`HOST:PORT`; port 0 picks a free port) and the view
-    /// task, on the current tokio runtime. Messages it drops are counted in `dropped` (e.g. the
-    /// service's `uavnav_foxglove_dropped_total`).
-    pub async fn start(addr: &str, dropped: Counter) -> Result<LiveView, LiveError> {
+    /// task, on the current tokio runtime. Messages it drops are counted in [`LiveTap::dropped`]
+    /// and reported to `on_drop` (e.g. the service's `uavnav_foxglove_dropped_total`).
+    pub async fn start(addr: &str, on_drop: OnDrop) -> Result<LiveView, LiveError> {
         let (host, port) = split_addr(addr)?;
         let ctx = Context::new();
         let server = WebSocketServer::new()
@@ -155,7 +174,11 @@ impl LiveView {
                 reason: e.to_string(),
             })?;
         let (tx, rx) = mpsc::channel(QUEUE_DEPTH);
-        let tap = LiveTap { tx, dropped };
+        let tap = LiveTap {
+            tx,
+            dropped: Arc::new(AtomicU64::new(0)),
+            on_drop,
+        };
         let task = tokio::spawn(run(Scene::new(ctx), rx));
         Ok(LiveView { server, tap, task })
     }
@@ -260,7 +283,7 @@ impl Scene {
             .unwrap_or_else(|| unreachable!("inserted above"))
     }
 
-    fn pose(&mut self, id: &str, p: &crate::hub::Pose) {
+    fn pose(&mut self, id: &str, p: &CompactPose) {
         // An estimate without a valid position or attitude (initialising) has nothing to draw.
         let Some(lla) = p.position.as_ref().and_then(|g| Lla::try_from(g).ok()) else {
             return;
@@ -325,7 +348,7 @@ impl Scene {
 }
 
 /// The estimate as a map fix, with its horizontal and vertical σ when the pose carries them.
-fn estimate_fix(p: &crate::hub::Pose, lla: &Lla) -> LocationFix {
+fn estimate_fix(p: &CompactPose, lla: &Lla) -> LocationFix {
     let sigma = p.sigma_pos_ned_m.as_ref();
     let (n, e, d) = sigma.map_or((0.0, 0.0, 0.0), |s| (s.x, s.y, s.z));
     LocationFix {

@@ -2,39 +2,10 @@
 //! horizontal drift at the end of a GNSS outage as a percentage of the distance flown in it, and
 //! the 3σ / NEES consistency. The CLI's `--report` writes [`AccuracyReport`] as JSON and Markdown.
 
-use nalgebra::{UnitQuaternion, Vector3};
-use uavnav_core::TruthSample;
-use uavnav_core::rotation::wrap_pi;
-
-use crate::output::PoseOutput;
-
-/// Truth interpolated at `t_ns` (linear position/velocity, slerp attitude); `truth` sorted by time.
-pub fn truth_at(truth: &[TruthSample], t_ns: i64) -> Option<TruthSample> {
-    let i = truth.partition_point(|s| s.t_ns < t_ns);
-    if i < truth.len() && truth[i].t_ns == t_ns {
-        return Some(truth[i]);
-    }
-    if i == 0 || i >= truth.len() {
-        return None;
-    }
-    let (a, b) = (&truth[i - 1], &truth[i]);
-    let w = (t_ns - a.t_ns) as f64 / (b.t_ns - a.t_ns) as f64;
-    Some(TruthSample {
-        t_ns,
-        pos_ned_m: a.pos_ned_m.lerp(&b.pos_ned_m, w),
-        vel_ned_mps: a.vel_ned_mps.lerp(&b.vel_ned_mps, w),
-        nav_from_body: a.nav_from_body.slerp(&b.nav_from_body, w),
-        gyro_bias_radps: a.gyro_bias_radps.lerp(&b.gyro_bias_radps, w),
-        accel_bias_mps2: a.accel_bias_mps2.lerp(&b.accel_bias_mps2, w),
-    })
-}
-
-/// Roll, pitch, yaw error (estimate − truth), wrapped, rad.
-pub fn euler_error(est: &UnitQuaternion<f64>, truth: &UnitQuaternion<f64>) -> Vector3<f64> {
-    let (r1, p1, y1) = est.euler_angles();
-    let (r0, p0, y0) = truth.euler_angles();
-    Vector3::new(wrap_pi(r1 - r0), wrap_pi(p1 - p0), wrap_pi(y1 - y0))
-}
+use nalgebra::Vector3;
+pub use uavnav_core::rotation::euler_error;
+pub use uavnav_core::truth::truth_at;
+use uavnav_core::{PoseOutput, TruthSample};
 
 /// Attitude RMSE (roll, pitch, yaw; rad) over outputs at or after `from_ns`.
 pub fn attitude_rmse(

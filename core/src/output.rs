@@ -1,0 +1,131 @@
+//! The estimator's output vocabulary, shared by everything that produces, carries or reads poses:
+//! [`PoseOutput`] (one estimate per IMU sample), its [`AidingFlags`], the filter [`Mode`] and the
+//! per-pose health summary [`PoseHealth`]. The estimator fills them; `uavnav-proto` converts them to
+//! and from the wire (lossless); `uavnav-dataset` writes them as CSV/TUM; `uavnav-report` scores them.
+
+use nalgebra::{UnitQuaternion, Vector3};
+
+use crate::Lla;
+
+/// Which aiding sources contributed recently (within the aid timeout).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct AidingFlags {
+    /// GNSS position fused recently.
+    pub gnss_pos: bool,
+    /// GNSS velocity fused recently.
+    pub gnss_vel: bool,
+    /// Vision rotation fused recently.
+    pub vision_rot: bool,
+    /// Vision translation fused recently.
+    pub vision_trans: bool,
+}
+
+/// One pose estimate, at an IMU sample time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseOutput {
+    /// Time, ns (the IMU sample's).
+    pub t_ns: i64,
+    /// Geodetic position of the body (IMU) origin.
+    pub lla: Lla,
+    /// Position in the local NED frame, m.
+    pub pos_ned_m: Vector3<f64>,
+    /// Velocity, NED, m/s.
+    pub vel_ned_mps: Vector3<f64>,
+    /// Rotation of body vectors into NED.
+    pub nav_from_body: UnitQuaternion<f64>,
+    /// Roll, pitch, yaw (ZYX), rad.
+    pub euler_rad: Vector3<f64>,
+    /// 1-σ position, NED, m.
+    pub sigma_pos_ned_m: Vector3<f64>,
+    /// 1-σ velocity, NED, m/s.
+    pub sigma_vel_mps: Vector3<f64>,
+    /// 1-σ roll, pitch, yaw, rad.
+    pub sigma_att_rad: Vector3<f64>,
+    /// Estimated gyro bias, rad/s (zero for the paper profile).
+    pub gyro_bias_radps: Vector3<f64>,
+    /// Estimated accelerometer bias, m/s² (zero for the paper profile).
+    pub accel_bias_mps2: Vector3<f64>,
+    /// Filter health at this output (the full snapshot: `uavnav_estimator::Estimator::health`).
+    pub health: PoseHealth,
+    /// Recently fused sources.
+    pub aiding: AidingFlags,
+}
+
+/// What the filter is currently running on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Mode {
+    /// Waiting for enough data to align.
+    #[default]
+    Initialising,
+    /// GNSS fused recently.
+    Nominal,
+    /// No recent GNSS; vision carries the solution.
+    GnssDeniedVision,
+    /// No recent aiding at all: inertial coasting.
+    InertialOnly,
+    /// Non-finite state or covariance beyond the divergence bounds.
+    Diverged,
+}
+
+impl Mode {
+    /// Every mode, in wire order.
+    pub const ALL: [Mode; 5] = [
+        Mode::Initialising,
+        Mode::Nominal,
+        Mode::GnssDeniedVision,
+        Mode::InertialOnly,
+        Mode::Diverged,
+    ];
+
+    /// Name for CSV columns and logs.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Mode::Initialising => "initialising",
+            Mode::Nominal => "nominal",
+            Mode::GnssDeniedVision => "gnss_denied_vision",
+            Mode::InertialOnly => "inertial_only",
+            Mode::Diverged => "diverged",
+        }
+    }
+}
+
+/// One aiding source at one output: its latest test ratio and counts (the estimator's innovation
+/// diagnostics without the innovation vectors).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SourceSummary {
+    /// Latest test ratio (normalised innovation squared over the gate; > 1 = rejected).
+    pub test_ratio: f64,
+    /// Measurements fused so far.
+    pub fused: u64,
+    /// Measurements rejected by the gate so far.
+    pub rejected: u64,
+}
+
+/// Health at one output: the mode, the counters and each source's summary. Every IMU sample gives
+/// an output, so this stays small (no innovation vectors, no covariance diagonal); the estimator's
+/// full snapshot is `uavnav_estimator::Health`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PoseHealth {
+    /// Current mode.
+    pub mode: Mode,
+    /// GNSS position.
+    pub gnss_pos: SourceSummary,
+    /// GNSS velocity.
+    pub gnss_vel: SourceSummary,
+    /// Vision relative rotation (paper profile: the pseudo-attitude).
+    pub vision_rot: SourceSummary,
+    /// Vision translation (direction / metric; paper: eq. 35 velocity).
+    pub vision_trans: SourceSummary,
+    /// Magnetometer heading.
+    pub mag: SourceSummary,
+    /// Barometric height.
+    pub baro: SourceSummary,
+    /// Inputs refused by validation (NaN, time going backwards, …).
+    pub inputs_rejected: u64,
+    /// Measurements that arrived behind the fusion horizon and were dropped.
+    pub late_dropped: u64,
+    /// Vision measurements dropped for lack of a clone at their frame-0 time.
+    pub vision_no_clone: u64,
+    /// GNSS inflate-and-fuse resets.
+    pub gnss_resets: u32,
+}

@@ -1,0 +1,166 @@
+//! Wire-message builders for service and client tests: plausible samples, envelopes, a vehicle
+//! configuration and a minimal JPEG header (what `server/tests` and the CLI tests used to write
+//! as literals each).
+
+use crate::pb;
+
+/// A level IMU sample at `t_ns`.
+pub fn imu(t_ns: i64) -> pb::ImuSample {
+    pb::ImuSample {
+        t_ns,
+        accel_z_mps2: -9.81,
+        ..Default::default()
+    }
+}
+
+/// An IMU envelope.
+pub fn imu_env(id: &str, seq: u64, samples: Vec<pb::ImuSample>) -> pb::SensorEnvelope {
+    pb::SensorEnvelope {
+        vehicle_id: id.into(),
+        sequence: seq,
+        payload: Some(pb::sensor_envelope::Payload::Imu(pb::ImuBatch { samples })),
+    }
+}
+
+/// A plausible GNSS fix.
+pub fn fix(t_ns: i64) -> pb::GnssFix {
+    pb::GnssFix {
+        t_ns,
+        latitude_deg: 45.0,
+        longitude_deg: 7.0,
+        altitude_m: 300.0,
+        sigma_horizontal_m: 1.0,
+        sigma_vertical_m: 2.0,
+        vel_north_mps: Some(0.0),
+        vel_east_mps: Some(0.0),
+        vel_down_mps: Some(0.0),
+        sigma_velocity_mps: Some(0.1),
+        fix_type: pb::FixType::Fix3d as i32,
+        num_satellites: 10,
+    }
+}
+
+/// A GNSS envelope.
+pub fn gnss_env(id: &str, seq: u64, f: pb::GnssFix) -> pb::SensorEnvelope {
+    pb::SensorEnvelope {
+        vehicle_id: id.into(),
+        sequence: seq,
+        payload: Some(pb::sensor_envelope::Payload::Gnss(f)),
+    }
+}
+
+/// A vehicle configuration, with a 640x480 camera when `camera`.
+pub fn vehicle_config(camera: bool) -> pb::VehicleConfig {
+    pb::VehicleConfig {
+        imu: Some(pb::ImuConfig {
+            rate_hz: 200.0,
+            gyro_noise_density: 1e-4,
+            gyro_random_walk: 2e-6,
+            accel_noise_density: 1e-3,
+            accel_random_walk: 1e-4,
+        }),
+        gnss: Some(pb::GnssConfig {
+            rate_hz: 5.0,
+            lever_arm_body_m: Some(pb::Vector3::default()),
+            ..Default::default()
+        }),
+        camera: camera.then(|| pb::CameraConfig {
+            camera_id: 0,
+            rate_hz: 10.0,
+            width_px: 640,
+            height_px: 480,
+            fx_px: 500.0,
+            fy_px: 500.0,
+            cx_px: 320.0,
+            cy_px: 240.0,
+            distortion_model: pb::DistortionModel::None as i32,
+            body_from_cam: Some(pb::RigidTransform {
+                rotation: Some(pb::Quaternion {
+                    w: 1.0,
+                    ..Default::default()
+                }),
+                translation_m: Some(pb::Vector3::default()),
+            }),
+            ..Default::default()
+        }),
+        terrain_elevation_m: 0.0,
+        profile: pb::FilterProfile::Eskf as i32,
+        mag: None,
+        baro: None,
+        // the service tests feed the simulator's fixed-wing flights
+        airframe: pb::Airframe::FixedWing as i32,
+    }
+}
+
+/// A magnetometer sample (a mid-latitude Earth field, tesla).
+pub fn mag(t_ns: i64) -> pb::MagSample {
+    pb::MagSample {
+        t_ns,
+        field_x_t: 2.2e-5,
+        field_y_t: 0.1e-5,
+        field_z_t: 4.1e-5,
+    }
+}
+
+/// A barometer sample.
+pub fn baro(t_ns: i64) -> pb::BaroSample {
+    pb::BaroSample {
+        t_ns,
+        pressure_pa: 97_700.0,
+        temperature_degc: Some(21.5),
+    }
+}
+
+/// A magnetometer envelope.
+pub fn mag_env(id: &str, seq: u64, m: pb::MagSample) -> pb::SensorEnvelope {
+    pb::SensorEnvelope {
+        vehicle_id: id.into(),
+        sequence: seq,
+        payload: Some(pb::sensor_envelope::Payload::Mag(m)),
+    }
+}
+
+/// A barometer envelope.
+pub fn baro_env(id: &str, seq: u64, b: pb::BaroSample) -> pb::SensorEnvelope {
+    pb::SensorEnvelope {
+        vehicle_id: id.into(),
+        sequence: seq,
+        payload: Some(pb::sensor_envelope::Payload::Baro(b)),
+    }
+}
+
+/// A config envelope.
+pub fn config_env(id: &str, seq: u64, camera: bool) -> pb::SensorEnvelope {
+    pb::SensorEnvelope {
+        vehicle_id: id.into(),
+        sequence: seq,
+        payload: Some(pb::sensor_envelope::Payload::Config(vehicle_config(camera))),
+    }
+}
+
+/// A minimal JPEG header (SOI + SOF0 with the given size + EOI): enough for header validation.
+pub fn jpeg_header(width: u16, height: u16) -> Vec<u8> {
+    let mut d = vec![0xFF, 0xD8, 0xFF, 0xC0, 0x00, 0x0B, 8];
+    d.extend(height.to_be_bytes());
+    d.extend(width.to_be_bytes());
+    d.extend([1, 1, 0x11, 0, 0xFF, 0xD9]);
+    d
+}
+
+/// A camera envelope carrying `data` as JPEG.
+pub fn camera_env(id: &str, seq: u64, t_ns: i64, data: Vec<u8>) -> pb::SensorEnvelope {
+    pb::SensorEnvelope {
+        vehicle_id: id.into(),
+        sequence: seq,
+        payload: Some(pb::sensor_envelope::Payload::Camera(pb::CameraFrame {
+            t_ns,
+            camera_id: 0,
+            image: Some(foxglove::messages::CompressedImage {
+                timestamp: None,
+                frame_id: "cam0".into(),
+                data: data.into(),
+                format: "jpeg".into(),
+            }),
+        })),
+    }
+}
