@@ -41,6 +41,30 @@ pub struct Estimator {
     /// Time of the last sample rejected for a time jump and how many continuous ones followed.
     jump_run: Option<(i64, u32)>,
     inputs_rejected: u64,
+    /// Restarts after a non-finite state or covariance (kept across them).
+    divergence_resets: u32,
+    /// Restarted after a divergence and no pose since: the mode is [`Mode::Diverged`].
+    diverged: bool,
+}
+
+/// Whether every number of a pose is finite: a pose with a NaN or infinite value is never
+/// published (the filter has diverged).
+fn output_finite(o: &PoseOutput) -> bool {
+    let vectors = [
+        &o.pos_ned_m,
+        &o.vel_ned_mps,
+        &o.euler_rad,
+        &o.sigma_pos_ned_m,
+        &o.sigma_vel_mps,
+        &o.sigma_att_rad,
+        &o.gyro_bias_radps,
+        &o.accel_bias_mps2,
+    ];
+    vectors.iter().all(|v| v.iter().all(|x| x.is_finite()))
+        && o.nav_from_body.coords.iter().all(|x| x.is_finite())
+        && [o.lla.lat_rad, o.lla.lon_rad, o.lla.alt_m]
+            .iter()
+            .all(|x| x.is_finite())
 }
 
 impl Estimator {
@@ -72,6 +96,8 @@ impl Estimator {
                 .unwrap_or_default(),
             jump_run: None,
             inputs_rejected: 0,
+            divergence_resets: 0,
+            diverged: false,
         }
     }
 
@@ -99,10 +125,31 @@ impl Estimator {
             Profile::Eskf(f) => f.push_imu(s),
             Profile::Paper(f) => f.push_imu(s),
         };
-        Ok(out.map(|mut o| {
-            o.health.inputs_rejected = self.inputs_rejected;
-            o
-        }))
+        let Some(mut o) = out else {
+            return Ok(None);
+        };
+        if !(output_finite(&o) && self.covariance_finite()) {
+            // Never publish NaN: restart, and report DIVERGED until the next pose.
+            self.restart_after_divergence();
+            return Ok(None);
+        }
+        self.diverged = false;
+        o.health.inputs_rejected = self.inputs_rejected;
+        Ok(Some(o))
+    }
+
+    fn covariance_finite(&self) -> bool {
+        match &self.profile {
+            Profile::Eskf(f) => f.covariance_finite(),
+            Profile::Paper(f) => f.covariance_finite(),
+        }
+    }
+
+    fn restart_after_divergence(&mut self) {
+        let resets = self.divergence_resets.saturating_add(1);
+        self.restart_after_gap();
+        self.divergence_resets = resets;
+        self.diverged = true;
     }
 
     /// Tracks samples after a time jump; true once the resumed stream is clearly continuous.
@@ -116,9 +163,10 @@ impl Estimator {
     }
 
     fn restart_after_gap(&mut self) {
-        let rejected = self.inputs_rejected;
+        let (rejected, resets) = (self.inputs_rejected, self.divergence_resets);
         self.reset();
         self.inputs_rejected = rejected;
+        self.divergence_resets = resets;
     }
 
     /// Adds a GNSS fix (fused at its time of validity, its stamp less the configured GNSS delay,
@@ -205,6 +253,10 @@ impl Estimator {
             Profile::Paper(p) => p.health(),
         };
         h.inputs_rejected = self.inputs_rejected;
+        h.divergence_resets = h.divergence_resets.saturating_add(self.divergence_resets);
+        if self.diverged {
+            h.mode = crate::health::Mode::Diverged;
+        }
         h
     }
 
@@ -229,5 +281,7 @@ impl Estimator {
         self.last_ego_t1_ns = None;
         self.jump_run = None;
         self.inputs_rejected = 0;
+        self.divergence_resets = 0;
+        self.diverged = false;
     }
 }

@@ -11,6 +11,8 @@
 //! | [`convert`] | `TryFrom<&wire>` for core types (validating; [`ConvertError`] names the field) and `From<&core>` for wire types |
 //! | [`compact`] | the compact pose the service carries from an actor to its senders ([`compact::Pose`], [`compact::PoseBatch`]) |
 //! | [`foxglove_conv`] | GNSS fix → `foxglove.LocationFix`, pose → `foxglove.PoseInFrame`, timestamps |
+//! | [`codec`] | the gRPC codec of the generated service: prost, with size limits checked on the wire before decoding |
+//! | [`wire`] | counting a repeated field's entries in encoded bytes without decoding them |
 //!
 //! Schemas live in `proto/uavnav/v1/*.proto` (common, sensors, config, outputs, service); every
 //! field is documented there with its unit and frame. They are compiled at build time by `protox`
@@ -32,9 +34,11 @@
 //! SI units; `int64 t_ns` nanoseconds on the vehicle's sensor clock; local NED world frame; body =
 //! FRD = IMU; camera = OpenCV; quaternions Hamilton, w first; `a_from_b` maps `b` into `a`.
 
+pub mod codec;
 pub mod compact;
 pub mod convert;
 pub mod foxglove_conv;
+pub mod wire;
 
 pub use convert::ConvertError;
 

@@ -29,4 +29,4 @@ pub use runner::{
 #[doc(no_inline)]
 pub use uavnav_core::MotionPrior;
 pub use uavnav_estimator::{Estimator, EstimatorParams, Health, Mode, PoseHealth, PoseOutput};
-pub use uavnav_vision::{FrontEnd, VisionParams};
+pub use uavnav_vision::{FrontEnd, NoMeasurement, VisionParams};

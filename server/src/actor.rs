@@ -18,7 +18,9 @@ use uavnav_core::{
 };
 
 use crate::config::VehiclesConfig;
-use crate::engine::{Engine, EngineStep, SharedFactory, VisionResult, VisionWork};
+use crate::engine::{
+    Engine, EngineStep, FrameFailureKind, SharedFactory, VisionResult, VisionWork,
+};
 use crate::health::HealthWindow;
 use crate::hub::{Hub, Pose, PoseBatch};
 use crate::metrics::Metrics;
@@ -50,6 +52,17 @@ pub struct Ctx {
     pub pool: Arc<VisionPool>,
     /// Engine factory.
     pub factory: SharedFactory,
+    /// Compressed camera bytes queued at all actors, and their limit (`vision.queue_bytes`).
+    pub camera_bytes: CameraBytes,
+}
+
+/// The global byte budget of the camera queues.
+#[derive(Debug, Default)]
+pub struct CameraBytes {
+    /// Compressed bytes of the frames queued at every actor.
+    pub queued: std::sync::atomic::AtomicUsize,
+    /// Most bytes queued at once (`vision.queue_bytes`).
+    pub limit: usize,
 }
 
 impl Ctx {
@@ -61,6 +74,16 @@ impl Ctx {
     /// The future limit, ns.
     pub fn max_future_ns(&self) -> i64 {
         (self.vehicles.max_future_s * 1e9) as i64
+    }
+
+    /// The time gate's limits.
+    pub fn gate_limits(&self) -> crate::vehicle::GateLimits {
+        crate::vehicle::GateLimits {
+            window_ns: self.window_ns(),
+            max_future_ns: self.max_future_ns(),
+            resync_samples: self.vehicles.clock_resync_samples,
+            resync_wall_ns: (self.vehicles.clock_resync_s * 1e9) as i64,
+        }
     }
 }
 
@@ -151,8 +174,18 @@ pub enum Msg {
 pub enum SendError {
     /// The actor is gone (evicted or stopping).
     Closed,
-    /// The camera queue is full (the frame is shed).
+    /// The vehicle's camera queue is full, in frames or bytes (the frame is shed).
     Full,
+    /// The camera queues of all vehicles together hold `vision.queue_bytes` (the frame is shed).
+    FullGlobal,
+}
+
+/// The compressed size of a camera input (0 for other inputs).
+fn frame_bytes(input: &Input) -> usize {
+    match input {
+        Input::Camera(c) => c.data.len(),
+        _ => 0,
+    }
 }
 
 /// The cloneable handle of a vehicle actor.
@@ -175,13 +208,30 @@ impl VehicleHandle {
         self.tx.send(msg).await.map_err(|e| e.0)
     }
 
-    /// Queues a camera frame unless the vehicle already has `limit` frames queued (then the
-    /// frame is shed: [`SendError::Full`]). Waits for room in the ordered queue otherwise.
-    pub async fn send_camera(&self, s: Stamped, limit: usize) -> Result<(), SendError> {
-        let queued = &self.shared.frames_queued;
-        if queued.fetch_add(1, std::sync::atomic::Ordering::AcqRel) >= limit {
-            queued.fetch_sub(1, std::sync::atomic::Ordering::AcqRel);
-            return Err(SendError::Full);
+    /// Queues a camera frame unless the vehicle already has `vehicles.camera_queue` frames or
+    /// `vehicles.camera_queue_bytes` bytes queued ([`SendError::Full`]), or all vehicles together
+    /// `vision.queue_bytes` ([`SendError::FullGlobal`]): then the frame is shed. Waits for room in
+    /// the ordered queue otherwise. The frame counts until the actor takes it off the queue.
+    pub async fn send_camera(&self, s: Stamped, ctx: &Ctx) -> Result<(), SendError> {
+        use std::sync::atomic::Ordering::AcqRel;
+        let (frames, bytes) = (&self.shared.frames_queued, &self.shared.frame_bytes_queued);
+        let global = &ctx.camera_bytes;
+        let size = frame_bytes(&s.input);
+        let undo = || {
+            frames.fetch_sub(1, AcqRel);
+            bytes.fetch_sub(size, AcqRel);
+            global.queued.fetch_sub(size, AcqRel);
+        };
+        let over_frames = frames.fetch_add(1, AcqRel) >= ctx.vehicles.camera_queue;
+        let over_bytes = bytes.fetch_add(size, AcqRel) + size > ctx.vehicles.camera_queue_bytes;
+        let over_global = global.queued.fetch_add(size, AcqRel) + size > global.limit;
+        if over_frames || over_bytes || over_global {
+            undo();
+            return Err(if over_frames || over_bytes {
+                SendError::Full
+            } else {
+                SendError::FullGlobal
+            });
         }
         let r = self
             .tx
@@ -189,7 +239,7 @@ impl VehicleHandle {
             .await
             .map_err(|_| SendError::Closed);
         if r.is_err() {
-            queued.fetch_sub(1, std::sync::atomic::Ordering::AcqRel);
+            undo();
         }
         r
     }
@@ -224,6 +274,7 @@ pub fn spawn(
         last_input: Instant::now(),
         ctx,
         span,
+        divergence_resets: 0,
     };
     tokio::spawn(async move {
         let evicted = actor.run(rx).await;
@@ -249,6 +300,8 @@ struct Actor {
     last_input: Instant,
     window: HealthWindow,
     span: Span,
+    /// The engine's divergence resets at the last health report (the metric counts the new ones).
+    divergence_resets: u64,
 }
 
 async fn recv_vision(
@@ -389,9 +442,11 @@ impl Actor {
 
     fn on_input(&mut self, s: Stamped) {
         if matches!(s.input, Input::Camera(_)) {
-            self.shared
-                .frames_queued
-                .fetch_sub(1, std::sync::atomic::Ordering::AcqRel);
+            use std::sync::atomic::Ordering::AcqRel;
+            let size = frame_bytes(&s.input);
+            self.shared.frames_queued.fetch_sub(1, AcqRel);
+            self.shared.frame_bytes_queued.fetch_sub(size, AcqRel);
+            self.ctx.camera_bytes.queued.fetch_sub(size, AcqRel);
         }
         let (t, kind) = (s.input.t_ns(), s.input.kind());
         match self.buffer.push(t, kind as u8, s) {
@@ -451,9 +506,20 @@ impl Actor {
         }
     }
 
-    /// Queues a step's poses for publication and sends its vision job to the pool.
+    /// Queues a step's poses for publication, counts a frame the vision job refused and sends
+    /// the step's vision job to the pool.
     fn apply(&mut self, step: EngineStep) {
         self.outbox.extend(step.poses);
+        if let Some(failure) = step.frame_failure {
+            // The frame was acknowledged (its header was good): count it now, as rejected input.
+            VehicleStats::add(&self.shared.stats.rejected, 1);
+            let cause = match failure.kind {
+                FrameFailureKind::Corrupt => crate::metrics::Cause::CorruptImage,
+                FrameFailureKind::Size => crate::metrics::Cause::ImageSize,
+            };
+            self.ctx.metrics.frame_rejected(cause);
+            debug!(parent: &self.span, t_ns = failure.t_ns, reason = %failure.reason, "camera frame refused by the vision job");
+        }
         self.start(step.work);
     }
 
@@ -552,6 +618,15 @@ impl Actor {
 
     fn publish_health(&mut self) {
         let engine = self.engine.health();
+        let resets = engine.divergence_resets;
+        if resets > self.divergence_resets {
+            self.ctx
+                .metrics
+                .divergence_resets
+                .inc_by(resets - self.divergence_resets);
+            warn!(parent: &self.span, resets, "estimator diverged (non-finite state) and was reset");
+        }
+        self.divergence_resets = resets;
         let report =
             Arc::new(
                 self.window

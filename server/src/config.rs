@@ -227,13 +227,24 @@ pub struct VehiclesConfig {
     pub idle_evict_s: f64,
     /// Inputs are fused in timestamp order within this window; older data is counted late, ms.
     pub reorder_window_ms: f64,
-    /// A sample more than this far ahead of the vehicle's latest sample is rejected, s (plus the
-    /// wall time since that sample arrived: a stream resuming after a silence is taken back).
+    /// A sample more than this far ahead of the vehicle's stream time is refused, s (plus the
+    /// wall time since the stream last moved: a stream resuming after a silence is taken back).
+    /// Also the most a forged sample can move the stream time ahead in one step.
     pub max_future_s: f64,
+    /// A run of this many consecutive IMU samples, consistent among themselves, refused for
+    /// being more than `max_future_s` away from the stream time (either way) means the vehicle's
+    /// clock jumped (a rebooted drone, a replay started over): the vehicle is reset and taken
+    /// back at the new time (counted in `uavnav_clock_resyncs_total`)...
+    pub clock_resync_samples: u32,
+    /// ...once the run has lasted this much wall time, s (a burst of retransmitted old data is
+    /// not a restarted clock: a new stream comes in real time).
+    pub clock_resync_s: f64,
     /// Capacity of each actor's sensor queue (IMU/GNSS batches); full = back-pressure, never shed.
     pub input_queue: usize,
     /// Camera frames one vehicle may have queued; beyond, new frames are shed (counted).
     pub camera_queue: usize,
+    /// Compressed camera bytes one vehicle may have queued; beyond, new frames are shed.
+    pub camera_queue_bytes: usize,
     /// Most vehicles served at once; more are refused with ResourceExhausted.
     pub max_vehicles: usize,
 }
@@ -243,9 +254,12 @@ impl Default for VehiclesConfig {
         Self {
             idle_evict_s: 300.0,
             reorder_window_ms: 20.0,
-            max_future_s: 10.0,
+            max_future_s: 1.0,
+            clock_resync_samples: 10,
+            clock_resync_s: 0.5,
             input_queue: 256,
             camera_queue: 32,
+            camera_queue_bytes: 16 << 20,
             max_vehicles: 10_000,
         }
     }
@@ -259,10 +273,17 @@ pub struct VisionConfig {
     pub workers: usize,
     /// Jobs waiting beyond the running ones; when full, frames are shed (counted).
     pub queue: usize,
+    /// Compressed camera bytes queued at all vehicles together; beyond, new frames are shed.
+    pub queue_bytes: usize,
     /// Largest accepted compressed image, bytes.
     pub max_image_bytes: usize,
-    /// Largest accepted image dimension (width or height), px.
-    pub max_image_side_px: u32,
+    /// Largest camera width a vehicle may configure, px.
+    pub max_camera_width_px: u32,
+    /// Largest camera height a vehicle may configure, px.
+    pub max_camera_height_px: u32,
+    /// Largest camera resolution a vehicle may configure, pixels (width × height): the vision
+    /// front end's memory per camera vehicle and the decode memory per job grow with it.
+    pub max_camera_pixels: u64,
 }
 
 impl Default for VisionConfig {
@@ -270,8 +291,11 @@ impl Default for VisionConfig {
         Self {
             workers: 0,
             queue: 16,
+            queue_bytes: 256 << 20,
             max_image_bytes: 12 << 20,
-            max_image_side_px: 8192,
+            max_camera_width_px: 4096,
+            max_camera_height_px: 4096,
+            max_camera_pixels: 4 << 20,
         }
     }
 }
@@ -539,6 +563,31 @@ impl Config {
                 "vehicles.idle_evict_s, vehicles.max_future_s and vehicles.max_vehicles must be > 0",
             );
         }
+        if !(v.max_future_s.is_finite() && v.max_future_s <= 86_400.0) {
+            return bad("vehicles.max_future_s must be at most 86400 (a day)");
+        }
+        if v.clock_resync_samples < 2 {
+            return bad("vehicles.clock_resync_samples must be at least 2");
+        }
+        if !(v.clock_resync_s >= 0.0 && v.clock_resync_s <= 3600.0) {
+            return bad("vehicles.clock_resync_s must be in [0, 3600]");
+        }
+        let vis = &self.vision;
+        if v.camera_queue_bytes < vis.max_image_bytes || vis.queue_bytes < vis.max_image_bytes {
+            return bad(
+                "vehicles.camera_queue_bytes and vision.queue_bytes must hold at least one frame of vision.max_image_bytes",
+            );
+        }
+        if vis.max_camera_width_px == 0
+            || vis.max_camera_height_px == 0
+            || vis.max_camera_pixels == 0
+            || vis.max_camera_width_px > 16_384
+            || vis.max_camera_height_px > 16_384
+        {
+            return bad(
+                "vision.max_camera_width_px and vision.max_camera_height_px must be in [1, 16384], vision.max_camera_pixels > 0",
+            );
+        }
         if self.health.period_ms == 0 {
             return bad("health.period_ms must be > 0");
         }
@@ -564,6 +613,13 @@ mod tests {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("uavnavd.toml");
         let cfg = Config::from_file(&path).unwrap();
         assert_eq!(cfg, Config::default());
+    }
+
+    #[test]
+    fn docker_config_parses_and_is_valid() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docker/uavnavd.toml");
+        let cfg = Config::from_file(&path).unwrap();
+        cfg.check().unwrap();
     }
 
     #[test]

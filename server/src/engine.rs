@@ -34,6 +34,9 @@ pub struct EngineHealth {
     pub vision_gate_rejections: u64,
     /// Inputs the engine refused or dropped (estimator validation, behind its horizon).
     pub engine_dropped: u64,
+    /// Estimator restarts after a divergence (a non-finite state, or the paper profile's tilt
+    /// check) so far.
+    pub divergence_resets: u64,
 }
 
 /// The result of a vision job, handed back to the engine that created it.
@@ -42,14 +45,37 @@ pub type VisionResult = Box<dyn Any + Send>;
 /// CPU work for one camera frame, run on the vision pool.
 pub type VisionWork = Box<dyn FnOnce() -> VisionResult + Send>;
 
-/// What one call produced: poses (`ingest_wall_ns` unset: the actor fills it in) and possibly a
-/// vision job to run on the pool.
+/// What is wrong with a camera frame that passed ingest (its header was good) but whose image
+/// the vision job could not use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameFailureKind {
+    /// The compressed body does not decode.
+    Corrupt,
+    /// The decoded size is not the configured camera's.
+    Size,
+}
+
+/// A camera frame the vision job refused for a fault of the image itself (not of the scene).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FrameFailure {
+    /// The frame's time, ns.
+    pub t_ns: i64,
+    /// What is wrong.
+    pub kind: FrameFailureKind,
+    /// The decoder's words.
+    pub reason: String,
+}
+
+/// What one call produced: poses (`ingest_wall_ns` unset: the actor fills it in), possibly a
+/// vision job to run on the pool, and, from [`Engine::finish_frame`], a frame refused as bad.
 #[derive(Default)]
 pub struct EngineStep {
     /// Poses in time order.
     pub poses: Vec<Pose>,
     /// Vision work to run; its result goes back through [`Engine::finish_frame`].
     pub work: Option<VisionWork>,
+    /// The finished frame's image was bad (counted by the actor in health and metrics).
+    pub frame_failure: Option<FrameFailure>,
 }
 
 impl std::fmt::Debug for EngineStep {
@@ -57,6 +83,7 @@ impl std::fmt::Debug for EngineStep {
         f.debug_struct("EngineStep")
             .field("poses", &self.poses.len())
             .field("work", &self.work.is_some())
+            .field("frame_failure", &self.frame_failure)
             .finish()
     }
 }

@@ -59,9 +59,14 @@ impl UavNavService {
 
 type BoxStream<T> = Pin<Box<dyn Stream<Item = Result<T, Status>> + Send + 'static>>;
 
-/// Maps tonic's decode failures to the statuses our contract promises.
+/// Maps tonic's decode failures to the statuses our contract promises: malformed protobuf and
+/// bad compressed data are INVALID_ARGUMENT (tonic: INTERNAL), an oversize message
+/// RESOURCE_EXHAUSTED (tonic: OUT_OF_RANGE).
 pub fn remap_decode_status(s: Status) -> Status {
     match s.code() {
+        tonic::Code::Internal if s.message().contains("decompressing") => {
+            Status::invalid_argument(format!("bad compressed data: {}", s.message()))
+        }
         tonic::Code::Internal if s.message().contains("decode") => {
             Status::invalid_argument(format!("malformed protobuf message: {}", s.message()))
         }
@@ -69,6 +74,25 @@ pub fn remap_decode_status(s: Status) -> Status {
             Status::resource_exhausted(format!("message too large: {}", s.message()))
         }
         _ => s,
+    }
+}
+
+/// Why an `Ingest` stream ended with an error, as a refusal cause (`None`: not the input's fault,
+/// e.g. the client went away).
+fn stream_cause(s: &Status) -> Option<Cause> {
+    let msg = s.message();
+    match s.code() {
+        tonic::Code::InvalidArgument if msg.starts_with("bad compressed data") => {
+            Some(Cause::Compression)
+        }
+        tonic::Code::InvalidArgument => Some(Cause::Malformed),
+        // Oversize, on the wire or once decompressed.
+        tonic::Code::ResourceExhausted => Some(Cause::TooLarge),
+        // Protocol errors (a compressed flag without an encoding, an unknown encoding...).
+        tonic::Code::Internal | tonic::Code::Unimplemented if !msg.contains("h2 protocol") => {
+            Some(Cause::Malformed)
+        }
+        _ => None,
     }
 }
 
@@ -89,7 +113,7 @@ pub async fn remap_transport_status<B>(
         .unwrap_or("")
         .to_ascii_lowercase();
     let new = match code.as_deref() {
-        Some("13") if msg.contains("decode") => Some("3"),
+        Some("13") if msg.contains("decode") || msg.contains("decompressing") => Some("3"),
         Some("11") if msg.contains("too%20large") || msg.contains("too large") => Some("8"),
         _ => None,
     };
@@ -324,10 +348,14 @@ impl UavNav for UavNavService {
                     None => break,
                     Some(Err(status)) => {
                         let status = remap_decode_status(status);
-                        if status.code() == tonic::Code::InvalidArgument {
+                        if let Some(cause) = stream_cause(&status) {
                             let metrics = &ingestor.registry().ctx().metrics;
-                            metrics.input(Transport::Grpc, Kind::Malformed, Outcome::Invalid, 1);
-                            metrics.refuse(Transport::Grpc, Kind::Malformed, Cause::Malformed);
+                            let outcome = match cause {
+                                Cause::TooLarge => Outcome::Exhausted,
+                                _ => Outcome::Invalid,
+                            };
+                            metrics.input(Transport::Grpc, Kind::Malformed, outcome, 1);
+                            metrics.refuse(Transport::Grpc, Kind::Malformed, cause);
                         }
                         let _ = tx.send(Err(status)).await;
                         break;

@@ -11,7 +11,7 @@ use crate::actor::{Input, Msg, SendError, Stamped, VehicleHandle};
 use crate::metrics::{Kind, Outcome, Transport};
 use crate::registry::{Registry, RegistryError};
 use crate::validate::{self, ImageLimits, Rejection};
-use crate::vehicle::{GateRefusal, InputKind, VehicleStats, wall_ns};
+use crate::vehicle::{Admitted, GateLimits, GateRefusal, InputKind, VehicleStats, wall_ns};
 
 /// One decoded input message.
 #[derive(Debug, Clone, Copy)]
@@ -216,14 +216,17 @@ impl Ingestor {
         let ctx = self.registry.ctx();
         let (at, wall) = (Instant::now(), wall_ns());
         let n = samples.len();
-        let limits = (ctx.window_ns(), ctx.max_future_ns());
-        let Admitted {
+        let GateOutcome {
             batch,
             late,
             future,
             first_refusal,
-        } = admit_imu(&h.shared, samples, at, wall, limits);
+            resync,
+        } = admit_imu(&h.shared, samples, at, wall, ctx.gate_limits());
         let accepted = batch.len() as u64;
+        if let Some(direction) = resync {
+            self.resync(&h, id, direction).await?;
+        }
         if accepted == 0 {
             // Counted once, as a refused message, by `submit`.
             return Err(gate_rejection(first_refusal));
@@ -269,14 +272,11 @@ impl Ingestor {
         let h = self.vehicle(id)?;
         let ctx = self.registry.ctx();
         let wall = wall_ns();
+        // Only IMU runs resynchronise a stream: other kinds are admitted or refused.
         h.shared
-            .admit(
-                kind,
-                input.t_ns(),
-                wall,
-                (ctx.window_ns(), ctx.max_future_ns()),
-                || kind.field().into(),
-            )
+            .admit(kind, input.t_ns(), wall, ctx.gate_limits(), || {
+                kind.field().into()
+            })
             .map_err(|r| gate_rejection(Some(r)))?;
         self.send(
             &h,
@@ -322,7 +322,7 @@ impl Ingestor {
                 InputKind::Camera,
                 frame.t_ns,
                 wall_ns(),
-                (ctx.window_ns(), ctx.max_future_ns()),
+                ctx.gate_limits(),
                 || "camera".into(),
             )
             .map_err(|r| gate_rejection(Some(r)))?;
@@ -332,13 +332,21 @@ impl Ingestor {
             wall_ns: wall,
             at: Instant::now(),
         };
-        match h.send_camera(stamped, ctx.vehicles.camera_queue).await {
+        match h.send_camera(stamped, ctx).await {
             Ok(()) => {}
             Err(SendError::Full) => {
                 ctx.metrics.vision_shed.inc();
-                return Err(Rejection::exhausted(
-                    "camera: the vehicle's camera queue is full; frame shed",
-                ));
+                return Err(Rejection::exhausted(format!(
+                    "camera: the vehicle's camera queue is full ({} frames or {} bytes); frame shed",
+                    ctx.vehicles.camera_queue, ctx.vehicles.camera_queue_bytes
+                )));
+            }
+            Err(SendError::FullGlobal) => {
+                ctx.metrics.vision_shed.inc();
+                return Err(Rejection::exhausted(format!(
+                    "camera: the service's camera queues hold their {} bytes (vision.queue_bytes); frame shed",
+                    ctx.camera_bytes.limit
+                )));
             }
             Err(SendError::Closed) => {
                 return Err(Rejection::exhausted(
@@ -359,6 +367,21 @@ impl Ingestor {
             .last_input_wall_ns
             .store(wall, std::sync::atomic::Ordering::Relaxed);
         Ok(Verdict::accepted(String::new()))
+    }
+
+    /// The vehicle's clock jumped (the gate saw a consistent run of samples far from its stream
+    /// time and started a new stream): the actor forgets the old stream (reorder window,
+    /// estimator) before the new stream's samples, which follow on the same queue.
+    async fn resync(
+        &self,
+        h: &VehicleHandle,
+        id: &str,
+        direction: crate::metrics::Direction,
+    ) -> Result<(), Rejection> {
+        VehicleStats::add(&h.shared.stats.resyncs, 1);
+        self.registry.ctx().metrics.resync(direction);
+        tracing::info!(vehicle = %id, ?direction, "vehicle clock jumped; stream taken back at its new time (estimator reset)");
+        self.send(h, id, Msg::Reset { reply: None }).await
     }
 
     /// Sends on the ordered queue, starting a fresh actor once if this one was evicted meanwhile.
@@ -382,7 +405,7 @@ impl Ingestor {
         wait: bool,
     ) -> Result<bool, Rejection> {
         validate::vehicle_id(id)?;
-        let (config, spec) = validate::vehicle_config(c, self.limits.max_side_px)?;
+        let (config, spec) = validate::vehicle_config(c, self.limits)?;
         let (h, created) = self
             .registry
             .get_or_create(id, Some(&config))
@@ -431,11 +454,14 @@ impl Ingestor {
 }
 
 /// The IMU samples of one message that passed the vehicle's time gate.
-struct Admitted {
+struct GateOutcome {
     batch: Vec<Stamped>,
     late: u64,
     future: u64,
     first_refusal: Option<GateRefusal>,
+    /// The gate started a new stream within this batch: `batch` holds the new stream's samples
+    /// only, and the actor must be reset before them.
+    resync: Option<crate::metrics::Direction>,
 }
 
 /// Runs a batch of IMU samples through the time gate under one lock (a plain function: the guard
@@ -445,30 +471,32 @@ fn admit_imu(
     samples: Vec<uavnav_core::ImuSample>,
     at: Instant,
     wall: i64,
-    (window_ns, max_future_ns): (i64, i64),
-) -> Admitted {
-    let mut out = Admitted {
+    limits: GateLimits,
+) -> GateOutcome {
+    let mut out = GateOutcome {
         batch: Vec::with_capacity(samples.len()),
         late: 0,
         future: 0,
         first_refusal: None,
+        resync: None,
     };
     let mut gate = shared.gate();
     for (i, s) in samples.into_iter().enumerate() {
         let field = || format!("imu.samples[{i}]");
-        match gate.admit(
-            InputKind::Imu,
-            s.t_ns,
-            wall,
-            window_ns,
-            max_future_ns,
-            field,
-        ) {
-            Ok(()) => out.batch.push(Stamped {
-                input: Input::Imu(s),
-                wall_ns: wall,
-                at,
-            }),
+        match gate.admit(InputKind::Imu, s.t_ns, wall, limits, field) {
+            Ok(admitted) => {
+                if let Admitted::Resync(direction) = admitted {
+                    // Samples of the old stream earlier in this batch go with it.
+                    out.late += out.batch.len() as u64;
+                    out.batch.clear();
+                    out.resync = Some(direction);
+                }
+                out.batch.push(Stamped {
+                    input: Input::Imu(s),
+                    wall_ns: wall,
+                    at,
+                });
+            }
             Err(r) => {
                 match &r {
                     GateRefusal::Future(_) => out.future += 1,

@@ -83,10 +83,20 @@ pub enum Cause {
     Future,
     /// Not applicable in the vehicle's state (a frame without a camera configured).
     Precondition,
-    /// A limit was reached (queue, vehicles, size).
+    /// A limit was reached (queue, vehicles).
     Exhausted,
+    /// Above a size limit: message bytes, IMU samples in a batch, image bytes or pixels (checked
+    /// before decoding).
+    TooLarge,
     /// Undecodable protobuf.
     Malformed,
+    /// Compressed data that does not decompress (bad gzip / zstd).
+    Compression,
+    /// A camera frame whose body does not decode although its header was good (counted when the
+    /// vision job finds it, after the frame was acknowledged).
+    CorruptImage,
+    /// A camera frame whose decoded size is not its header's.
+    ImageSize,
 }
 
 /// Why the recorder dropped a message: the `reason` label of `uavnav_record_dropped_total`.
@@ -126,7 +136,11 @@ lowercase_label!(Cause {
     Future => "future",
     Precondition => "precondition",
     Exhausted => "exhausted",
+    TooLarge => "too_large",
     Malformed => "malformed",
+    Compression => "compression",
+    CorruptImage => "corrupt_image",
+    ImageSize => "image_size",
 });
 lowercase_label!(RecordDrop { QueueFull => "queue_full", Lagged => "lagged", WriteError => "write_error" });
 lowercase_label!(Outcome {
@@ -157,6 +171,31 @@ pub struct RefusedLabels {
     pub transport: Transport,
     /// Kind.
     pub kind: Kind,
+    /// Why.
+    pub reason: Cause,
+}
+
+/// Labels of `uavnav_clock_resyncs_total`.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, EncodeLabelSet)]
+pub struct ResyncLabels {
+    /// Which way the vehicle's clock jumped.
+    pub direction: Direction,
+}
+
+/// Which way a vehicle's clock jumped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Direction {
+    /// Back (a restarted clock: a rebooted drone, a replay started over).
+    Back,
+    /// Ahead, without the silence that would explain it.
+    Ahead,
+}
+
+lowercase_label!(Direction { Back => "back", Ahead => "ahead" });
+
+/// Labels of `uavnav_vision_frames_rejected_total`.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, EncodeLabelSet)]
+pub struct FrameRejectLabels {
     /// Why.
     pub reason: Cause,
 }
@@ -218,6 +257,14 @@ pub struct Metrics {
     pub zenoh_samples: Counter,
     /// Messages the Foxglove live view skipped because it was behind.
     pub foxglove_dropped: Counter,
+    /// Vehicles taken back at a new time after their clock jumped (a consistent run of samples
+    /// far from the stream time), by direction.
+    pub clock_resyncs: Family<ResyncLabels, Counter>,
+    /// Acknowledged camera frames the vision job could not use because the image itself is bad
+    /// (corrupt body, size not the header's), by reason.
+    pub frames_rejected: Family<FrameRejectLabels, Counter>,
+    /// Estimator resets after a non-finite state (the vehicle reported DIVERGED).
+    pub divergence_resets: Counter,
 }
 
 impl Metrics {
@@ -246,6 +293,24 @@ impl Metrics {
         let watch_lagged = Counter::default();
         let zenoh_samples = Counter::default();
         let foxglove_dropped = Counter::default();
+        let clock_resyncs = Family::<ResyncLabels, Counter>::default();
+        let frames_rejected = Family::<FrameRejectLabels, Counter>::default();
+        let divergence_resets = Counter::default();
+        registry.register(
+            "clock_resyncs",
+            "Vehicles taken back at a new time after a consistent jump of their clock",
+            clock_resyncs.clone(),
+        );
+        registry.register(
+            "vision_frames_rejected",
+            "Acknowledged camera frames whose image turned out bad when decoded, by reason",
+            frames_rejected.clone(),
+        );
+        registry.register(
+            "divergence_resets",
+            "Estimator resets after a non-finite state (reported as mode DIVERGED)",
+            divergence_resets.clone(),
+        );
         registry.register(
             "inputs",
             "Sensor inputs by transport, kind and outcome",
@@ -372,7 +437,24 @@ impl Metrics {
             watch_lagged,
             zenoh_samples,
             foxglove_dropped,
+            clock_resyncs,
+            frames_rejected,
+            divergence_resets,
         }
+    }
+
+    /// Counts one clock resynchronisation.
+    pub fn resync(&self, direction: Direction) {
+        self.clock_resyncs
+            .get_or_create(&ResyncLabels { direction })
+            .inc();
+    }
+
+    /// Counts one acknowledged frame the vision job refused.
+    pub fn frame_rejected(&self, reason: Cause) {
+        self.frames_rejected
+            .get_or_create(&FrameRejectLabels { reason })
+            .inc();
     }
 
     /// Counts `n` inputs.

@@ -5,10 +5,13 @@ use uavnav_core::{SensorEvent, VehicleConfig};
 use uavnav_proto::compact::compact_pose;
 use uavnav_proto::convert::output::mode_to_wire;
 use uavnav_proto::v1 as pb;
-use uavnav_runner::{Health, PoseOutput, RunnerParams, Step, VehicleRunner, VisionDone};
+use uavnav_runner::{
+    Health, NoMeasurement, PoseOutput, RunnerParams, Step, VehicleRunner, VisionDone,
+};
 
 use crate::engine::{
-    Engine, EngineError, EngineFactory, EngineHealth, EngineStep, VisionResult, VisionWork,
+    Engine, EngineError, EngineFactory, EngineHealth, EngineStep, FrameFailure, FrameFailureKind,
+    VisionResult, VisionWork,
 };
 use crate::hub::Pose;
 
@@ -69,7 +72,11 @@ impl RunnerEngine {
     fn step(&mut self, mut step: Step) -> EngineStep {
         let mut poses = Vec::with_capacity(step.poses.len());
         let work = self.emit(&mut step, &mut poses);
-        EngineStep { poses, work }
+        EngineStep {
+            poses,
+            work,
+            frame_failure: None,
+        }
     }
 }
 
@@ -77,7 +84,11 @@ impl Engine for RunnerEngine {
     fn push(&mut self, event: SensorEvent) -> Result<EngineStep, EngineError> {
         let mut poses = Vec::new();
         let work = self.push_into(event, &mut poses)?;
-        Ok(EngineStep { poses, work })
+        Ok(EngineStep {
+            poses,
+            work,
+            frame_failure: None,
+        })
     }
 
     fn push_into(
@@ -97,8 +108,11 @@ impl Engine for RunnerEngine {
     fn finish_frame(&mut self, done: VisionResult) -> EngineStep {
         match done.downcast::<VisionDone>() {
             Ok(done) => {
+                let failure = frame_failure(&done);
                 let step = self.runner.finish_frame(*done);
-                self.step(step)
+                let mut step = self.step(step);
+                step.frame_failure = failure;
+                step
             }
             // Only this engine's jobs come back here; anything else is a wiring bug, not input.
             Err(_) => EngineStep::default(),
@@ -127,6 +141,7 @@ impl Engine for RunnerEngine {
             gnss_gate_rejections: h.gnss_pos.rejected + h.gnss_vel.rejected,
             vision_gate_rejections: h.vision_rot.rejected + h.vision_trans.rejected,
             engine_dropped: h.inputs_rejected + h.late_dropped + v.abandoned,
+            divergence_resets: u64::from(h.divergence_resets),
         }
     }
 
@@ -143,6 +158,26 @@ impl Engine for RunnerEngine {
         let step = self.runner.abandon_job();
         self.step(step)
     }
+}
+
+/// The fault of the frame itself, when the front end could not use it because of its image (a
+/// corrupt body behind a good header, a decoded size not the camera's); scene conditions (dark,
+/// blurred, textureless) are not faults of the input.
+fn frame_failure(done: &VisionDone) -> Option<FrameFailure> {
+    let kind = match &done.result.outcome {
+        Err(NoMeasurement::Decode(_)) => FrameFailureKind::Corrupt,
+        Err(NoMeasurement::SizeMismatch { .. }) => FrameFailureKind::Size,
+        _ => return None,
+    };
+    let reason = match &done.result.outcome {
+        Err(e) => e.to_string(),
+        Ok(_) => String::new(),
+    };
+    Some(FrameFailure {
+        t_ns: done.result.t1_ns,
+        kind,
+        reason,
+    })
 }
 
 /// A runner job as pool work.

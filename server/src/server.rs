@@ -80,11 +80,17 @@ impl Server {
             hub: hub.clone(),
             pool: Arc::clone(&pool),
             factory,
+            camera_bytes: crate::actor::CameraBytes {
+                queued: Default::default(),
+                limit: config.vision.queue_bytes,
+            },
         });
         let registry = Registry::new(ctx);
         let limits = ImageLimits {
             max_bytes: config.vision.max_image_bytes,
-            max_side_px: config.vision.max_image_side_px,
+            max_width_px: config.vision.max_camera_width_px,
+            max_height_px: config.vision.max_camera_height_px,
+            max_pixels: config.vision.max_camera_pixels,
         };
         let mut ingestor =
             Ingestor::new(Arc::clone(&registry), limits, config.grpc.max_message_bytes);

@@ -14,8 +14,9 @@ use uavnav_proto::v1 as pb;
 
 use crate::metrics::Cause;
 
-/// Most IMU samples in one batch.
-pub const MAX_IMU_BATCH: usize = 10_000;
+/// Most IMU samples in one batch (the gRPC codec and the Zenoh input count them on the wire,
+/// before decoding, and keep at most one more than this).
+pub const MAX_IMU_BATCH: usize = uavnav_proto::convert::limits::MAX_IMU_BATCH_SAMPLES;
 /// Longest vehicle id.
 pub const MAX_ID_LEN: usize = 128;
 
@@ -62,6 +63,11 @@ impl Rejection {
             Cause::Exhausted,
             reason,
         )
+    }
+
+    /// RESOURCE_EXHAUSTED for an input above a size limit (bytes, samples, pixels).
+    pub fn too_large(reason: impl Into<String>) -> Self {
+        Self::new(pb::IngestStatus::ResourceExhausted, Cause::TooLarge, reason)
     }
 
     /// The matching gRPC status (for unary calls).
@@ -135,9 +141,9 @@ pub fn imu_batch(b: &pb::ImuBatch) -> Check<Vec<ImuSample>> {
         return Err(Rejection::invalid("imu.samples: empty batch"));
     }
     if b.samples.len() > MAX_IMU_BATCH {
-        return Err(Rejection::exhausted(format!(
-            "imu.samples: {} samples, limit {MAX_IMU_BATCH}",
-            b.samples.len()
+        // The transports decode at most one sample more than the limit: the true count is larger.
+        return Err(Rejection::too_large(format!(
+            "imu.samples: more than {MAX_IMU_BATCH} samples in one batch (limit {MAX_IMU_BATCH})"
         )));
     }
     let samples = convert::sensors::imu_batch(b).map_err(|e| invalid_in("imu", e))?;
@@ -184,13 +190,46 @@ pub struct CameraSpec {
     pub height: u32,
 }
 
-/// Image limits.
+/// Image limits (the service's `[vision]` configuration).
 #[derive(Debug, Clone, Copy)]
 pub struct ImageLimits {
     /// Largest compressed size, bytes.
     pub max_bytes: usize,
-    /// Largest side, px.
-    pub max_side_px: u32,
+    /// Largest camera width, px.
+    pub max_width_px: u32,
+    /// Largest camera height, px.
+    pub max_height_px: u32,
+    /// Largest camera resolution, pixels (width × height).
+    pub max_pixels: u64,
+}
+
+impl ImageLimits {
+    /// Checks a resolution against the limits; the error names `field` and the limit's key.
+    pub fn check(&self, field: &str, w: u32, h: u32) -> Check<()> {
+        let pixels = u64::from(w) * u64::from(h);
+        let over = if w > self.max_width_px {
+            Some(format!(
+                "width {w} px above the service's maximum {} px (vision.max_camera_width_px)",
+                self.max_width_px
+            ))
+        } else if h > self.max_height_px {
+            Some(format!(
+                "height {h} px above the service's maximum {} px (vision.max_camera_height_px)",
+                self.max_height_px
+            ))
+        } else if pixels > self.max_pixels {
+            Some(format!(
+                "{w}x{h} = {pixels} pixels above the service's maximum {} (vision.max_camera_pixels)",
+                self.max_pixels
+            ))
+        } else {
+            None
+        };
+        match over {
+            Some(why) => Err(Rejection::too_large(format!("{field}: {why}"))),
+            None => Ok(()),
+        }
+    }
 }
 
 /// Validates a camera frame against the vehicle's camera (if any) and converts it.
@@ -213,7 +252,7 @@ pub fn camera_frame(
     // Size first: the conversion copies the bytes.
     let size = c.image.as_ref().map_or(0, |i| i.data.len());
     if size > limits.max_bytes {
-        return Err(Rejection::exhausted(format!(
+        return Err(Rejection::too_large(format!(
             "camera.image.data: {size} bytes, limit {}",
             limits.max_bytes
         )));
@@ -225,6 +264,8 @@ pub fn camera_frame(
             frame.t_ns
         )));
     }
+    // The header's size, before anything is decoded: an image bomb (a small file announcing a
+    // huge image) is refused here, never handed to a decoder.
     let (w, h) = match frame.format {
         ImageFormat::Jpeg => jpeg_dimensions(&frame.data),
         ImageFormat::Png => png_dimensions(&frame.data),
@@ -235,12 +276,7 @@ pub fn camera_frame(
             frame.format.as_str()
         ))
     })?;
-    if w > limits.max_side_px || h > limits.max_side_px {
-        return Err(Rejection::exhausted(format!(
-            "camera.image: {w}x{h} px exceeds the {} px limit",
-            limits.max_side_px
-        )));
-    }
+    limits.check("camera.image", w, h)?;
     if (w, h) != (spec.width, spec.height) {
         return Err(Rejection::invalid(format!(
             "camera.image: {w}x{h} px does not match the configured {}x{}",
@@ -284,30 +320,47 @@ pub fn jpeg_dimensions(d: &[u8]) -> Option<(u32, u32)> {
     }
 }
 
-/// Width and height from a PNG's IHDR chunk.
+/// The PNG signature.
+const PNG_SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', b'\r', b'\n', 0x1A, b'\n'];
+
+/// Width and height from a PNG's IHDR chunk (the first chunk, 13 bytes), which must be
+/// well-formed: a known bit depth and colour type (decoders refuse others, after allocating).
 pub fn png_dimensions(d: &[u8]) -> Option<(u32, u32)> {
+    if d.get(0..8)? != PNG_SIGNATURE || d.get(8..12)? != [0, 0, 0, 13] {
+        return None;
+    }
     if d.get(12..16)? != b"IHDR" {
         return None;
     }
     let w = u32::from_be_bytes(d.get(16..20)?.try_into().ok()?);
     let h = u32::from_be_bytes(d.get(20..24)?.try_into().ok()?);
-    (w > 0 && h > 0).then_some((w, h))
+    let (depth, colour) = (*d.get(24)?, *d.get(25)?);
+    let valid = match colour {
+        0 => matches!(depth, 1 | 2 | 4 | 8 | 16),
+        3 => matches!(depth, 1 | 2 | 4 | 8),
+        2 | 4 | 6 => matches!(depth, 8 | 16),
+        _ => false,
+    };
+    (valid && w > 0 && h > 0).then_some((w, h))
 }
 
-/// Validates a vehicle configuration and converts it; also returns the camera spec for frames.
+/// Validates a vehicle configuration (the contract's plausibility bounds, and a camera within the
+/// service's maximum resolution) and converts it; also returns the camera spec for frames.
 pub fn vehicle_config(
     c: &pb::VehicleConfig,
-    max_side_px: u32,
+    limits: ImageLimits,
 ) -> Check<(VehicleConfig, Option<CameraSpec>)> {
     let config = VehicleConfig::try_from(c).map_err(|e| invalid_in("config", e))?;
     let spec = match (&c.camera, &config.camera) {
         (Some(wire), Some(cam)) => {
             let (width, height) = (cam.model.width, cam.model.height);
-            if width > max_side_px || height > max_side_px {
-                return Err(Rejection::invalid(format!(
-                    "config.camera: {width}x{height} px exceeds the {max_side_px} px limit"
-                )));
-            }
+            // A configuration is refused as invalid (the camera cannot be served), not shed.
+            limits
+                .check("config.camera", width, height)
+                .map_err(|r| Rejection {
+                    status: pb::IngestStatus::InvalidArgument,
+                    ..r
+                })?;
             Some(CameraSpec {
                 camera_id: wire.camera_id,
                 width,

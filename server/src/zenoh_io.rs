@@ -268,6 +268,34 @@ async fn decode_loop(
             );
             continue;
         }
+        // A batch's samples are counted on the wire, before anything is allocated: an empty
+        // sample is 2 bytes encoded, 56 decoded.
+        if kind == Kind::Imu {
+            let limit = crate::validate::MAX_IMU_BATCH;
+            match uavnav_proto::wire::count_field(&bytes, 1) {
+                Ok(n) if n > limit => {
+                    reject(
+                        &ingestor,
+                        id,
+                        kind,
+                        Outcome::Exhausted,
+                        &format!("imu.samples: {n} samples in one batch, limit {limit}"),
+                    );
+                    continue;
+                }
+                Ok(_) => {}
+                Err(e) => {
+                    reject(
+                        &ingestor,
+                        id,
+                        kind,
+                        Outcome::Invalid,
+                        &format!("malformed protobuf: {e}"),
+                    );
+                    continue;
+                }
+            }
+        }
         let verdict = match kind {
             Kind::Imu => decode::<pb::ImuBatch>(&bytes)
                 .map(|m| (ingestor.clone(), id.to_owned(), In::Imu(m))),
@@ -334,7 +362,8 @@ fn reject(ingestor: &Ingestor, id: &str, kind: Kind, outcome: Outcome, reason: &
     let metrics = &ingestor.registry().ctx().metrics;
     metrics.input(Transport::Zenoh, kind, outcome, 1);
     let cause = match outcome {
-        Outcome::Exhausted => crate::metrics::Cause::Exhausted,
+        // The only limits checked before decoding are sizes (message bytes, batch samples).
+        Outcome::Exhausted => crate::metrics::Cause::TooLarge,
         _ => crate::metrics::Cause::Malformed,
     };
     metrics.refuse(Transport::Zenoh, kind, cause);

@@ -125,16 +125,20 @@ impl LumaDecoder {
     }
 
     fn decode_png(&self, data: &[u8], out: &mut [u8]) -> Result<(), DecodeError> {
-        let img =
-            image::load_from_memory_with_format(data, image::ImageFormat::Png).map_err(|e| {
-                DecodeError::Corrupt {
-                    format: "png",
-                    detail: e.to_string(),
-                }
-            })?;
-        if (img.width(), img.height()) != (self.width, self.height) {
-            return Err(self.mismatch(img.width() as usize, img.height() as usize));
+        use image::ImageDecoder;
+        let corrupt = |e: image::ImageError| DecodeError::Corrupt {
+            format: "png",
+            detail: e.to_string(),
+        };
+        // The header first: a frame announcing another size is refused before the decoder
+        // allocates for it (a small PNG can announce a huge image).
+        let decoder =
+            image::codecs::png::PngDecoder::new(std::io::Cursor::new(data)).map_err(corrupt)?;
+        let (w, h) = decoder.dimensions();
+        if (w, h) != (self.width, self.height) {
+            return Err(self.mismatch(w as usize, h as usize));
         }
+        let img = image::DynamicImage::from_decoder(decoder).map_err(corrupt)?;
         let luma = img.into_luma8();
         out.copy_from_slice(luma.as_raw());
         Ok(())

@@ -32,6 +32,12 @@ impl Eskf {
         }
     }
 
+    /// Whether the error covariance's diagonal is finite (a NaN variance would be reported as a
+    /// σ of 0: `NaN.max(0.0)` is 0).
+    pub fn covariance_finite(&self) -> bool {
+        (0..N).all(|k| self.p[(k, k)].is_finite())
+    }
+
     /// Health at the current horizon.
     pub fn health(&self) -> Health {
         let mut cov_diag = [0.0; N];

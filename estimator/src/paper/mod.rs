@@ -587,6 +587,20 @@ impl PaperFilter {
         )
     }
 
+    /// Whether the filters' covariance diagonals are finite (a NaN variance would be reported
+    /// as a σ of 0).
+    pub fn covariance_finite(&self) -> bool {
+        let att = self
+            .att
+            .as_ref()
+            .is_none_or(|a| (0..3).all(|k| a.p[(k, k)].is_finite()));
+        let pv = [&self.gps_imu, &self.vio2]
+            .into_iter()
+            .flatten()
+            .all(|f| (0..6).all(|k| f.p[(k, k)].is_finite()));
+        att && pv
+    }
+
     /// Health (mode from the filters' activity).
     pub fn health(&self) -> Health {
         let mut h = self.health;

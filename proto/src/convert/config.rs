@@ -5,12 +5,34 @@ use uavnav_core::{
     GnssConfig, ImuConfig, MagConfig, VehicleConfig,
 };
 
+use nalgebra::Vector3;
+
 use super::geometry::{isometry, required_quaternion, required_vector3};
-use super::{ConvertError, finite, in_range, non_negative, positive, required};
+use super::limits::{
+    AIDING_RATE_HZ, FOCAL_RANGE_PX, IMU_RATE_HZ, MAX_ACCEL_NOISE_DENSITY, MAX_ACCEL_RANDOM_WALK,
+    MAX_DISTORTION_COEFF, MAX_GYRO_NOISE_DENSITY, MAX_GYRO_RANDOM_WALK, MAX_OFFSET_M,
+};
+use super::{ConvertError, in_range, positive, required};
 use crate::v1;
 
-/// Largest accepted sensor rate, Hz.
-const MAX_RATE_HZ: f64 = 100_000.0;
+/// An aiding sensor's rate, Hz.
+fn aiding_rate(field: &str, hz: f64) -> Result<f64, ConvertError> {
+    in_range(field, hz, AIDING_RATE_HZ.0, AIDING_RATE_HZ.1)
+}
+
+/// A noise density or random walk: finite, in `[0, hi]` (0 lets the estimator use its floor).
+fn noise(field: &str, value: f64, hi: f64) -> Result<f64, ConvertError> {
+    in_range(field, value, 0.0, hi)
+}
+
+/// A sensor offset from the IMU, each component within [`MAX_OFFSET_M`].
+fn offset(field: &str, v: Vector3<f64>) -> Result<Vector3<f64>, ConvertError> {
+    for (axis, c) in ["x", "y", "z"].into_iter().zip(v.iter()) {
+        in_range(axis, *c, -MAX_OFFSET_M, MAX_OFFSET_M).map_err(|e| e.within(field))?;
+    }
+    Ok(v)
+}
+
 /// Largest accepted image side, px.
 const MAX_IMAGE_SIDE_PX: u32 = 16_384;
 /// Accepted terrain elevation range, m (ellipsoidal).
@@ -20,11 +42,23 @@ impl TryFrom<&v1::ImuConfig> for ImuConfig {
     type Error = ConvertError;
     fn try_from(c: &v1::ImuConfig) -> Result<Self, ConvertError> {
         Ok(ImuConfig {
-            rate_hz: positive("rate_hz", c.rate_hz, MAX_RATE_HZ)?,
-            gyro_noise_density: non_negative("gyro_noise_density", c.gyro_noise_density)?,
-            gyro_random_walk: non_negative("gyro_random_walk", c.gyro_random_walk)?,
-            accel_noise_density: non_negative("accel_noise_density", c.accel_noise_density)?,
-            accel_random_walk: non_negative("accel_random_walk", c.accel_random_walk)?,
+            rate_hz: in_range("rate_hz", c.rate_hz, IMU_RATE_HZ.0, IMU_RATE_HZ.1)?,
+            gyro_noise_density: noise(
+                "gyro_noise_density",
+                c.gyro_noise_density,
+                MAX_GYRO_NOISE_DENSITY,
+            )?,
+            gyro_random_walk: noise("gyro_random_walk", c.gyro_random_walk, MAX_GYRO_RANDOM_WALK)?,
+            accel_noise_density: noise(
+                "accel_noise_density",
+                c.accel_noise_density,
+                MAX_ACCEL_NOISE_DENSITY,
+            )?,
+            accel_random_walk: noise(
+                "accel_random_walk",
+                c.accel_random_walk,
+                MAX_ACCEL_RANDOM_WALK,
+            )?,
         })
     }
 }
@@ -45,8 +79,11 @@ impl TryFrom<&v1::GnssConfig> for GnssConfig {
     type Error = ConvertError;
     fn try_from(c: &v1::GnssConfig) -> Result<Self, ConvertError> {
         Ok(GnssConfig {
-            rate_hz: positive("rate_hz", c.rate_hz, MAX_RATE_HZ)?,
-            lever_arm_body_m: required_vector3("lever_arm_body_m", &c.lever_arm_body_m)?,
+            rate_hz: aiding_rate("rate_hz", c.rate_hz)?,
+            lever_arm_body_m: offset(
+                "lever_arm_body_m",
+                required_vector3("lever_arm_body_m", &c.lever_arm_body_m)?,
+            )?,
             delay_ns: uavnav_core::s_to_ns(in_range(
                 "delay_s",
                 c.delay_s,
@@ -74,7 +111,7 @@ impl TryFrom<&v1::MagConfig> for MagConfig {
     type Error = ConvertError;
     fn try_from(c: &v1::MagConfig) -> Result<Self, ConvertError> {
         Ok(MagConfig {
-            rate_hz: positive("rate_hz", c.rate_hz, MAX_RATE_HZ)?,
+            rate_hz: aiding_rate("rate_hz", c.rate_hz)?,
             body_from_mag: required_quaternion("body_from_mag", &c.body_from_mag)?,
             sigma_t: positive("sigma_t", c.sigma_t, super::limits::MAX_MAG_FIELD_T)?,
         })
@@ -95,7 +132,7 @@ impl TryFrom<&v1::BaroConfig> for BaroConfig {
     type Error = ConvertError;
     fn try_from(c: &v1::BaroConfig) -> Result<Self, ConvertError> {
         Ok(BaroConfig {
-            rate_hz: positive("rate_hz", c.rate_hz, MAX_RATE_HZ)?,
+            rate_hz: aiding_rate("rate_hz", c.rate_hz)?,
             sigma_pressure_pa: positive("sigma_pressure_pa", c.sigma_pressure_pa, 1.0e4)?,
         })
     }
@@ -138,10 +175,11 @@ fn image_side(field: &str, px: u32) -> Result<u32, ConvertError> {
 
 fn distortion(c: &v1::CameraConfig) -> Result<Distortion, ConvertError> {
     use v1::DistortionModel as M;
-    let k1 = finite("k1", c.k1)?;
-    let k2 = finite("k2", c.k2)?;
-    let p1 = finite("p1", c.p1)?;
-    let p2 = finite("p2", c.p2)?;
+    let coeff = |name: &str, k: f64| in_range(name, k, -MAX_DISTORTION_COEFF, MAX_DISTORTION_COEFF);
+    let k1 = coeff("k1", c.k1)?;
+    let k2 = coeff("k2", c.k2)?;
+    let p1 = coeff("p1", c.p1)?;
+    let p2 = coeff("p2", c.p2)?;
     let all_zero = [k1, k2, p1, p2].iter().all(|&k| k == 0.0);
     match M::try_from(c.distortion_model) {
         Ok(M::None) => Ok(Distortion::None),
@@ -158,13 +196,18 @@ fn distortion(c: &v1::CameraConfig) -> Result<Distortion, ConvertError> {
 impl TryFrom<&v1::CameraConfig> for CameraModel {
     type Error = ConvertError;
     fn try_from(c: &v1::CameraConfig) -> Result<Self, ConvertError> {
+        let width = image_side("width_px", c.width_px)?;
+        let height = image_side("height_px", c.height_px)?;
+        let (f_lo, f_hi) = FOCAL_RANGE_PX;
+        // The principal point lies on the image, or within one image size of it.
+        let (w, h) = (f64::from(width), f64::from(height));
         Ok(CameraModel {
-            width: image_side("width_px", c.width_px)?,
-            height: image_side("height_px", c.height_px)?,
-            fx: positive("fx_px", c.fx_px, 1.0e6)?,
-            fy: positive("fy_px", c.fy_px, 1.0e6)?,
-            cx: in_range("cx_px", c.cx_px, -1.0e5, 1.0e5)?,
-            cy: in_range("cy_px", c.cy_px, -1.0e5, 1.0e5)?,
+            width,
+            height,
+            fx: in_range("fx_px", c.fx_px, f_lo, f_hi)?,
+            fy: in_range("fy_px", c.fy_px, f_lo, f_hi)?,
+            cx: in_range("cx_px", c.cx_px, -w, 2.0 * w)?,
+            cy: in_range("cy_px", c.cy_px, -h, 2.0 * h)?,
             distortion: distortion(c)?,
         })
     }
@@ -184,8 +227,12 @@ impl TryFrom<&v1::CameraConfig> for CameraConfig {
             "body_from_cam",
             required("body_from_cam", &c.body_from_cam)?,
         )?;
+        offset(
+            "body_from_cam.translation_m",
+            body_from_cam.translation.vector,
+        )?;
         Ok(CameraConfig {
-            rate_hz: positive("rate_hz", c.rate_hz, MAX_RATE_HZ)?,
+            rate_hz: aiding_rate("rate_hz", c.rate_hz)?,
             model: CameraModel::try_from(c)?,
             body_from_cam,
         })

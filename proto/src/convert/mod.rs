@@ -42,6 +42,34 @@ pub mod limits {
     pub const MAX_GNSS_DELAY_S: f64 = 5.0;
     /// Largest accepted deviation of a quaternion's norm from 1 (the quaternion is then normalised).
     pub const QUAT_NORM_TOL: f64 = 1.0e-2;
+    /// Most IMU samples in one `ImuBatch` (counted on the wire before decoding: see
+    /// [`crate::wire`]).
+    pub const MAX_IMU_BATCH_SAMPLES: usize = 10_000;
+    /// Most vehicle ids in one `WatchRequest`.
+    pub const MAX_WATCH_IDS: usize = 10_000;
+
+    // Plausibility of vehicle configurations: generous bounds (orders of magnitude beyond any
+    // UAV sensor), so that a value in the wrong unit or a garbage number is refused with the field
+    // named instead of driving the filter to NaN.
+
+    /// Accepted IMU sample rate, Hz (a 10 Hz logged IMU is the slowest seen).
+    pub const IMU_RATE_HZ: (f64, f64) = (1.0, 100_000.0);
+    /// Accepted rate of the aiding sensors (GNSS, magnetometer, barometer, camera), Hz.
+    pub const AIDING_RATE_HZ: (f64, f64) = (0.01, 10_000.0);
+    /// Largest gyro white noise density, rad/s/√Hz (MEMS: 1e-4–1e-2).
+    pub const MAX_GYRO_NOISE_DENSITY: f64 = 1.0;
+    /// Largest gyro bias random walk, rad/s²/√Hz (MEMS: 1e-6–1e-3).
+    pub const MAX_GYRO_RANDOM_WALK: f64 = 0.1;
+    /// Largest accelerometer white noise density, m/s²/√Hz (MEMS: 1e-3–1e-1).
+    pub const MAX_ACCEL_NOISE_DENSITY: f64 = 10.0;
+    /// Largest accelerometer bias random walk, m/s³/√Hz (MEMS: 1e-5–1e-2).
+    pub const MAX_ACCEL_RANDOM_WALK: f64 = 1.0;
+    /// Largest component of a sensor's offset from the IMU (GNSS lever arm, camera mount), m.
+    pub const MAX_OFFSET_M: f64 = 100.0;
+    /// Accepted focal lengths, px.
+    pub const FOCAL_RANGE_PX: (f64, f64) = (1.0, 1.0e6);
+    /// Largest magnitude of a radial-tangential distortion coefficient.
+    pub const MAX_DISTORTION_COEFF: f64 = 100.0;
 }
 
 /// What is wrong with a wire message, naming the field (a dotted path such as
