@@ -467,7 +467,8 @@ async fn publish_outputs(
     mut done: oneshot::Receiver<()>,
 ) {
     let metrics = ingestor.registry().ctx().metrics.clone();
-    let watched = PoseSubscribers::declare(&session).await;
+    let watched = Subscribers::declare(&session, "pose").await;
+    let health_watched = Subscribers::declare(&session, "health").await;
     let out = Outputs {
         session,
         pose_enc: encoding("uavnav.v1.PoseEstimate"),
@@ -477,7 +478,8 @@ async fn publish_outputs(
         tokio::select! {
             biased;
             r = health.recv() => match r {
-                Ok(h) => out.health(&h).await,
+                Ok(h) if health_watched.any() => out.health(&h).await,
+                Ok(_) => {}
                 Err(broadcast::error::RecvError::Lagged(n)) => {
                     metrics.zenoh_output_lagged.inc_by(n);
                 }
@@ -502,19 +504,21 @@ async fn publish_outputs(
     }
 }
 
-/// Whether any Zenoh subscriber anywhere matches some vehicle's `pose` key. Poses come at IMU rate
-/// for the whole fleet: when nobody subscribes, encoding and routing each one would cost more than
-/// estimating it. (Health, at 1 Hz per vehicle, is always published.)
-struct PoseSubscribers {
+/// Whether any Zenoh subscriber anywhere matches some vehicle's output key (`pose` or `health`).
+/// Poses come at IMU rate for the whole fleet: when nobody subscribes, encoding and routing each one
+/// would cost more than estimating it. Health comes at 1 Hz per vehicle, which for an idle fleet of
+/// 10,000 vehicles was most of a core spent routing reports nobody asked for: it is gated the same
+/// way, so an idle vehicle costs nothing on Zenoh.
+struct Subscribers {
     any: Arc<std::sync::atomic::AtomicBool>,
     /// Kept for its matching listener (declared on the wildcard key, never put on).
     _publisher: Option<zenoh::pubsub::Publisher<'static>>,
 }
 
-impl PoseSubscribers {
-    async fn declare(session: &Session) -> Self {
+impl Subscribers {
+    async fn declare(session: &Session, leaf: &str) -> Self {
         use std::sync::atomic::{AtomicBool, Ordering};
-        let key = format!("{VEHICLE_PREFIX}/*/pose");
+        let key = format!("{VEHICLE_PREFIX}/*/{leaf}");
         let any = Arc::new(AtomicBool::new(true));
         // Remote subscribers only: the service's own input subscriber (`uavnav/v1/vehicle/*/*`)
         // matches this key too, and it never wants poses.
@@ -526,7 +530,7 @@ impl PoseSubscribers {
             Ok(p) => p,
             Err(e) => {
                 // Without the listener, publish every pose (correct, only slower).
-                warn!(key, error = %e, "no pose matching listener; publishing every pose");
+                warn!(key, error = %e, "no matching listener; publishing every output");
                 return Self {
                     any,
                     _publisher: None,
@@ -545,7 +549,7 @@ impl PoseSubscribers {
                 key,
                 listener = ?l.err(),
                 status = ?s.err(),
-                "pose matching status unavailable; publishing every pose"
+                "matching status unavailable; publishing every output"
             ),
         }
         Self {
