@@ -9,7 +9,9 @@
 //! | [`v1::uav_nav_server`], [`v1::uav_nav_client`] | the tonic server trait / client of service `uavnav.v1.UavNav` |
 //! | [`FILE_DESCRIPTOR_SET`] | encoded `FileDescriptorSet` of all schemas (gRPC reflection, MCAP schemas) |
 //! | [`convert`] | `TryFrom<&wire>` for core types (validating; [`ConvertError`] names the field) and `From<&core>` for wire types |
-//! | [`foxglove_conv`] | GNSS fix → `foxglove.LocationFix`, pose → `foxglove.PoseInFrame`, timestamps |
+//! | [`foxglove_conv`] | GNSS fix → `foxglove.LocationFix`, pose → `foxglove.PoseInFrame`, timestamps, a recorded camera image → `CameraFrame` |
+//! | [`keys`] | the service's Zenoh key expressions (`uavnav/v1/vehicle/{id}/{leaf}`, ...), used by the service and the client |
+//! | [`topics`] | the MCAP recording topics (`/uavnav/{vehicle}/{stream}`), used by the dataset reader/writer, the recorders and the client's recording reader |
 //!
 //! Schemas live in `proto/uavnav/v1/*.proto` (common, sensors, config, outputs, service); every
 //! field is documented there with its unit and frame. They are compiled at build time by `protox`
@@ -33,6 +35,8 @@
 
 pub mod convert;
 pub mod foxglove_conv;
+pub mod keys;
+pub mod topics;
 
 pub use convert::ConvertError;
 
@@ -53,11 +57,11 @@ pub mod names {
     pub const IMU_BATCH: &str = "uavnav.v1.ImuBatch";
     /// `uavnav.v1.GnssFix`.
     pub const GNSS_FIX: &str = "uavnav.v1.GnssFix";
-    /// `uavnav.v1.CameraFrame`.
     /// `uavnav.v1.MagSample`.
     pub const MAG_SAMPLE: &str = "uavnav.v1.MagSample";
     /// `uavnav.v1.BaroSample`.
     pub const BARO_SAMPLE: &str = "uavnav.v1.BaroSample";
+    /// `uavnav.v1.CameraFrame`.
     pub const CAMERA_FRAME: &str = "uavnav.v1.CameraFrame";
     /// `uavnav.v1.VehicleConfig`.
     pub const VEHICLE_CONFIG: &str = "uavnav.v1.VehicleConfig";
@@ -65,6 +69,8 @@ pub mod names {
     pub const POSE_ESTIMATE: &str = "uavnav.v1.PoseEstimate";
     /// `uavnav.v1.VehicleHealth`.
     pub const VEHICLE_HEALTH: &str = "uavnav.v1.VehicleHealth";
+    /// `uavnav.v1.ListVehiclesResponse`.
+    pub const LIST_VEHICLES_RESPONSE: &str = "uavnav.v1.ListVehiclesResponse";
     /// `uavnav.v1.TruthSample`.
     pub const TRUTH_SAMPLE: &str = "uavnav.v1.TruthSample";
     /// `uavnav.v1.DatasetInfo`.

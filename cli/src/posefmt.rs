@@ -9,7 +9,7 @@ use uavnav_core::{Lla, LocalFrame};
 use uavnav_estimator::health::{Mode, PoseHealth};
 use uavnav_estimator::output::PoseOutput;
 
-use crate::pb;
+use uavnav_client::pb;
 
 /// The CSV header: the `estimate` columns, then `vehicle_id`.
 pub fn csv_header() -> String {
