@@ -1,16 +1,34 @@
 #!/usr/bin/env bash
-# Fails when a pure crate (no I/O, no clock, no runtime) reaches the async runtime, the RPC stack,
-# the protobuf runtime or the network middleware through its normal dependencies.
+# Fails when
+# - a pure crate (no I/O, no clock, no runtime) reaches the async runtime, the RPC stack, the
+#   protobuf runtime or the network middleware through its normal dependencies;
+# - the client library (what a ground-station backend adds) reaches any crate of ours other than
+#   the wire contract (uavnav-proto, and uavnav-core through it) — the service, the simulator, the
+#   vision front end, the estimator, the runner, the report, the datasets, the CLI — or plotters,
+#   with its default features (the superset: zenoh and recording).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 status=0
+# The names of the crates in a package's normal dependency tree. Called as `x=$(crates_of P)` so
+# that a failing `cargo tree` (stale lock file, unknown package) stops the guard (set -e).
+crates_of() {
+    local tree
+    tree=$(cargo tree -p "$1" -e normal --prefix none --locked) || return 1
+    printf '%s\n' "$tree" | awk '{print $1}' | sort -u
+}
 for crate in uavnav-core uavnav-sim uavnav-vision uavnav-estimator uavnav-runner; do
-    tree=$(cargo tree -p "$crate" -e normal --prefix none --locked)
-    bad=$(printf '%s\n' "$tree" | awk '{print $1}' | sort -u | grep -E '^(tokio|tonic|prost|zenoh)$' || true)
+    crates=$(crates_of "$crate")
+    bad=$(printf '%s\n' "$crates" | grep -E '^(tokio|tonic|prost|zenoh)$' || true)
     if [ -n "$bad" ]; then
         echo "dependency guard: pure crate $crate reaches: $(echo $bad | tr '\n' ' ')" >&2
         status=1
     fi
 done
-[ "$status" -eq 0 ] && echo "dependency guard: the pure crates reach no tokio, tonic, prost or zenoh"
+crates=$(crates_of uavnav-client)
+bad=$(printf '%s\n' "$crates" | grep -E '^(uavnav|plotters)' | grep -vxE 'uavnav-(client|proto|core)' || true)
+if [ -n "$bad" ]; then
+    echo "dependency guard: the client library uavnav-client reaches: $(echo $bad | tr '\n' ' ')(allowed of ours: uavnav-proto, uavnav-core)" >&2
+    status=1
+fi
+[ "$status" -eq 0 ] && echo "dependency guard: the pure crates reach no tokio, tonic, prost or zenoh; uavnav-client reaches no crate of ours beyond uavnav-proto and uavnav-core, and no plotters"
 exit "$status"

@@ -67,8 +67,8 @@ fi
 target_dir=${CARGO_TARGET_DIR:-$root/target}
 bin_dir=$target_dir/$profile_dir
 if [ "$run_cargo" = 1 ]; then
-    echo "build.sh: cargo build --profile $profile -p uavnavd -p uavnav-client (target dir $target_dir)"
-    (cd "$root" && cargo build --locked --profile "$profile" -p uavnavd -p uavnav-client)
+    echo "build.sh: cargo build --profile $profile -p uavnavd -p uavnav-cli (target dir $target_dir)"
+    (cd "$root" && cargo build --locked --profile "$profile" -p uavnavd -p uavnav-cli)
 fi
 for b in uavnavd uavnav; do
     [ -x "$bin_dir/$b" ] || { echo "build.sh: $bin_dir/$b missing (build it, or drop --no-cargo)" >&2; exit 1; }

@@ -29,6 +29,7 @@ use crate::ingest::{Ingest, IngestStats, Sink, spawn_grpc_driver};
 use crate::keys::Leaf;
 use crate::pb;
 use crate::watch::{Selector, Watch};
+#[cfg(feature = "zenoh")]
 use crate::zenoh_backend;
 
 /// Connection settings.
@@ -58,6 +59,7 @@ impl Default for ConnectOptions {
 #[derive(Debug, Clone)]
 enum Backend {
     Grpc(RawClient),
+    #[cfg(feature = "zenoh")]
     Zenoh(zenoh::Session),
     Discard,
 }
@@ -77,12 +79,20 @@ impl Client {
             Endpoint::Grpc { uri } => {
                 Backend::Grpc(grpc::connect(uri, opts.connect_timeout).await?)
             }
+            #[cfg(feature = "zenoh")]
             Endpoint::Zenoh {
                 connect,
                 client_mode,
             } => Backend::Zenoh(
                 zenoh_backend::open(connect, *client_mode, opts.connect_timeout).await?,
             ),
+            #[cfg(not(feature = "zenoh"))]
+            Endpoint::Zenoh { .. } => {
+                return Err(ClientError::Unsupported {
+                    op: "connect",
+                    transport: "Zenoh (uavnav-client was built without its `zenoh` feature)",
+                });
+            }
             Endpoint::Discard => Backend::Discard,
         };
         Ok(Client {
@@ -103,6 +113,7 @@ impl Client {
     }
 
     /// The Zenoh session, when connected over Zenoh (for recording raw traffic).
+    #[cfg(feature = "zenoh")]
     pub fn zenoh_session(&self) -> Option<&zenoh::Session> {
         match &self.backend {
             Backend::Zenoh(s) => Some(s),
@@ -149,10 +160,10 @@ impl Client {
         &self,
         prefix: &str,
     ) -> Result<Vec<pb::VehicleSummary>, ClientError> {
-        let t = self.opts.request_timeout;
         match &self.backend {
             Backend::Grpc(c) => self.retry("ListVehicles", || grpc::list(c, prefix)).await,
-            Backend::Zenoh(s) => zenoh_backend::list(s, prefix, t).await,
+            #[cfg(feature = "zenoh")]
+            Backend::Zenoh(s) => zenoh_backend::list(s, prefix, self.opts.request_timeout).await,
             Backend::Discard => Ok(Vec::new()),
         }
     }
@@ -160,10 +171,10 @@ impl Client {
     /// The latest pose of `id` ([`ClientError::NotFound`] if unknown or none yet).
     pub async fn get_pose(&self, id: &str) -> Result<pb::PoseEstimate, ClientError> {
         check_vehicle_id(id)?;
-        let t = self.opts.request_timeout;
         match &self.backend {
             Backend::Grpc(c) => self.retry("GetPose", || grpc::get_pose(c, id)).await,
-            Backend::Zenoh(s) => zenoh_backend::get_pose(s, id, t).await,
+            #[cfg(feature = "zenoh")]
+            Backend::Zenoh(s) => zenoh_backend::get_pose(s, id, self.opts.request_timeout).await,
             Backend::Discard => Err(ClientError::NotFound(id.to_string())),
         }
     }
@@ -181,6 +192,7 @@ impl Client {
                 .retry("ConfigureVehicle", || grpc::configure(c, id, config))
                 .await
                 .map(Some),
+            #[cfg(feature = "zenoh")]
             Backend::Zenoh(s) => zenoh_backend::configure(s, id, config).await.map(|()| None),
             Backend::Discard => Ok(None),
         }
@@ -191,6 +203,7 @@ impl Client {
         check_vehicle_id(id)?;
         match &self.backend {
             Backend::Grpc(c) => self.retry("ResetVehicle", || grpc::reset(c, id)).await,
+            #[cfg(feature = "zenoh")]
             Backend::Zenoh(_) => Err(ClientError::Unsupported {
                 op: "reset",
                 transport: "Zenoh",
@@ -240,6 +253,9 @@ impl Client {
         for id in &sel.ids {
             check_vehicle_id(id)?;
         }
+        // The Zenoh backend subscribes to the leaf's key; gRPC has one call per leaf.
+        #[cfg(not(feature = "zenoh"))]
+        let _ = leaf;
         let backoff = self.opts.backoff.clone();
         match &self.backend {
             Backend::Grpc(c) => {
@@ -264,6 +280,7 @@ impl Client {
                     }
                 }))
             }
+            #[cfg(feature = "zenoh")]
             Backend::Zenoh(s) => {
                 let first = zenoh_backend::subscribe::<M>(s, &sel, leaf).await?;
                 let first = Arc::new(std::sync::Mutex::new(Some(first)));
@@ -295,6 +312,7 @@ impl Client {
                     spawn_grpc_driver(c.clone(), rx, Arc::clone(&stats), self.opts.backoff.clone());
                 Ingest::new(Sink::Grpc(tx), stats, Some(task))
             }
+            #[cfg(feature = "zenoh")]
             Backend::Zenoh(s) => Ingest::new(Sink::Zenoh(s.clone()), stats, None),
             Backend::Discard => Ingest::new(Sink::Discard, stats, None),
         })
@@ -302,6 +320,7 @@ impl Client {
 
     /// Closes the connection (Zenoh: the session; gRPC: dropped with the last clone).
     pub async fn close(self) {
+        #[cfg(feature = "zenoh")]
         if let Backend::Zenoh(s) = self.backend {
             let _ = s.close().await;
         }

@@ -144,6 +144,7 @@ mod tests {
 #[derive(Debug, Clone)]
 pub(crate) enum Sink {
     Grpc(mpsc::Sender<pb::SensorEnvelope>),
+    #[cfg(feature = "zenoh")]
     Zenoh(zenoh::Session),
     Discard,
 }
@@ -153,6 +154,7 @@ pub(crate) enum Sink {
 pub struct IngestSender {
     sink: Sink,
     /// Vehicles whose Zenoh key already had (or was waited for) a matching subscriber.
+    #[cfg(feature = "zenoh")]
     matched: Arc<Mutex<std::collections::BTreeSet<String>>>,
     seq: Arc<AtomicU64>,
     stats: Arc<IngestStats>,
@@ -201,6 +203,7 @@ impl IngestSender {
                     .map_err(|_| ClientError::Closed("ingest stream"))?;
                 self.stats.bytes.fetch_add(len as u64, Ordering::Relaxed);
             }
+            #[cfg(feature = "zenoh")]
             Sink::Zenoh(session) => {
                 let key = crate::keys::vehicle_key(vehicle_id, leaf);
                 self.await_subscriber(session, vehicle_id, &key).await;
@@ -248,6 +251,7 @@ impl IngestSender {
         &self.stats
     }
 
+    #[cfg(feature = "zenoh")]
     /// On a vehicle's first Zenoh message: waits until the service's subscription is known, so
     /// the start of the stream is not routed nowhere. Counted as an error when none shows up.
     async fn await_subscriber(&self, session: &zenoh::Session, vehicle_id: &str, key: &str) {
@@ -297,6 +301,7 @@ impl Ingest {
         Self {
             sender: IngestSender {
                 sink,
+                #[cfg(feature = "zenoh")]
                 matched: Arc::default(),
                 seq: Arc::new(AtomicU64::new(0)),
                 stats,

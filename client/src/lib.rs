@@ -1,8 +1,11 @@
 //! # uavnav-client
 //!
-//! A typed async client of the uavnav fleet estimation service (`uavnavd`), with the same API over
-//! gRPC and over Zenoh, plus the engines behind the `uavnav` CLI's online subcommands (load test,
-//! replay scheduling, recording).
+//! The library a ground-station backend adds to talk to the uavnav fleet estimation service
+//! (`uavnavd`): a typed async client with the same API over gRPC and (feature `zenoh`, on by
+//! default) Zenoh — stream sensors in, watch poses and health, list, configure and reset
+//! vehicles — and (feature `recording`, on by default) a reader of uavnav MCAP recordings. It
+//! depends on the wire contract (`uavnav-proto`) and the transports only: none of the service,
+//! the simulator, the estimator or the `uavnav` CLI (crate `uavnav-cli`).
 //!
 //! | module | what it holds |
 //! |---|---|
@@ -13,16 +16,18 @@
 //! | [`ingest`] | [`Ingest`] / [`IngestSender`]: a vehicle's sensor stream into the service, with counted acks |
 //! | [`watch`] | [`Watch`], [`Selector`]: pose and health subscriptions that resume after failures |
 //! | [`grpc`] | the gRPC backend (tonic `uavnav.v1.UavNav` client) |
-//! | [`zenoh_backend`] | the Zenoh backend (key expressions of [`keys`]) |
-//! | [`keys`] | the Zenoh key expressions of the service |
-//! | [`schedule`] | sensor events → timed wire messages (IMU batching, speed, time offsets) |
-//! | [`load`] | the load generator and its latency/throughput measurement (coordinated-omission correct) |
-//! | [`report`] | the load test report: ghz-like JSON and the text table |
-//! | [`posefmt`] | wire poses → the `uavnav estimate` CSV columns and TUM lines |
+//! | `zenoh_backend` | the Zenoh backend (feature `zenoh`; key expressions of [`keys`]) |
+//! | [`keys`] | the service's Zenoh key expressions (re-exported from `uavnav_proto::keys`) |
+//! | `recording` | feature `recording`: an MCAP recording (`uavnav record`, uavnavd's recorder, `uavnav convert`) as wire messages in log-time order |
+//! | [`pb`] | the `uavnav.v1` wire messages (re-exported from `uavnav_proto::v1`) |
 //!
 //! Over Zenoh there is no acknowledgement and no reset: [`Client::reset`] returns
 //! [`ClientError::Unsupported`], and [`Client::configure`] publishes on the vehicle's `config` key
-//! without learning whether the vehicle was created.
+//! without learning whether the vehicle was created. Built without the `zenoh` feature, a `zenoh…`
+//! endpoint still parses, and [`Client::connect`] to it returns [`ClientError::Unsupported`].
+//!
+//! `examples/feed_recording.rs` streams a recording into a running service and prints the poses
+//! it gets back, with this crate alone.
 
 pub mod backoff;
 pub mod client;
@@ -30,12 +35,10 @@ pub mod endpoint;
 pub mod error;
 pub mod grpc;
 pub mod ingest;
-pub mod keys;
-pub mod load;
-pub mod posefmt;
-pub mod report;
-pub mod schedule;
+#[cfg(feature = "recording")]
+pub mod recording;
 pub mod watch;
+#[cfg(feature = "zenoh")]
 pub mod zenoh_backend;
 
 pub use backoff::Backoff;
@@ -43,6 +46,7 @@ pub use client::{Client, ConnectOptions};
 pub use endpoint::Endpoint;
 pub use error::ClientError;
 pub use ingest::{Ingest, IngestSender, IngestStats};
+pub use uavnav_proto::keys;
 pub use uavnav_proto::v1 as pb;
 pub use watch::{Selector, Watch};
 

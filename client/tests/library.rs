@@ -8,24 +8,6 @@ use std::time::Duration;
 use common::*;
 use uavnav_client::{Client, ClientError, ConnectOptions, Endpoint, Selector, pb};
 
-#[test]
-fn zenoh_keys_match_the_service() {
-    use uavnav_client::keys;
-    assert_eq!(keys::VEHICLE_PREFIX, uavnavd::zenoh_io::VEHICLE_PREFIX);
-    assert_eq!(keys::VEHICLES, uavnavd::zenoh_io::VEHICLES_KEY);
-    assert_eq!(keys::SERVICE_PREFIX, uavnavd::zenoh_io::SERVICE_PREFIX);
-    assert_eq!(
-        keys::pose_latest_key("*"),
-        uavnavd::zenoh_io::POSE_LATEST_KEYS
-    );
-    let client_inputs: Vec<&str> = keys::Leaf::INPUTS.iter().map(|l| l.as_str()).collect();
-    let service_inputs: Vec<&str> = uavnavd::zenoh_io::INPUT_LEAVES
-        .iter()
-        .map(|(l, _)| *l)
-        .collect();
-    assert_eq!(client_inputs, service_inputs);
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn library_same_api_over_grpc_and_zenoh() {
     let svc = start().await;

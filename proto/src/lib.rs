@@ -10,9 +10,11 @@
 //! | [`FILE_DESCRIPTOR_SET`] | encoded `FileDescriptorSet` of all schemas (gRPC reflection, MCAP schemas) |
 //! | [`convert`] | `TryFrom<&wire>` for core types (validating; [`ConvertError`] names the field) and `From<&core>` for wire types |
 //! | [`compact`] | the compact pose the service carries from an actor to its senders ([`compact::Pose`], [`compact::PoseBatch`]) |
-//! | [`foxglove_conv`] | GNSS fix → `foxglove.LocationFix`, pose → `foxglove.PoseInFrame`, timestamps |
+//! | [`foxglove_conv`] | GNSS fix → `foxglove.LocationFix`, pose → `foxglove.PoseInFrame`, timestamps, a recorded camera image → `CameraFrame` |
 //! | [`codec`] | the gRPC codec of the generated service: prost, with size limits checked on the wire before decoding |
 //! | [`wire`] | counting a repeated field's entries in encoded bytes without decoding them |
+//! | [`keys`] | the service's Zenoh key expressions (`uavnav/v1/vehicle/{id}/{leaf}`, ...), used by the service and the client |
+//! | [`topics`] | the MCAP recording topics (`/uavnav/{vehicle}/{stream}`), used by the dataset reader/writer, the recorders and the client's recording reader |
 //!
 //! Schemas live in `proto/uavnav/v1/*.proto` (common, sensors, config, outputs, service); every
 //! field is documented there with its unit and frame. They are compiled at build time by `protox`
@@ -38,6 +40,8 @@ pub mod codec;
 pub mod compact;
 pub mod convert;
 pub mod foxglove_conv;
+pub mod keys;
+pub mod topics;
 pub mod wire;
 
 pub use convert::ConvertError;
@@ -59,11 +63,11 @@ pub mod names {
     pub const IMU_BATCH: &str = "uavnav.v1.ImuBatch";
     /// `uavnav.v1.GnssFix`.
     pub const GNSS_FIX: &str = "uavnav.v1.GnssFix";
-    /// `uavnav.v1.CameraFrame`.
     /// `uavnav.v1.MagSample`.
     pub const MAG_SAMPLE: &str = "uavnav.v1.MagSample";
     /// `uavnav.v1.BaroSample`.
     pub const BARO_SAMPLE: &str = "uavnav.v1.BaroSample";
+    /// `uavnav.v1.CameraFrame`.
     pub const CAMERA_FRAME: &str = "uavnav.v1.CameraFrame";
     /// `uavnav.v1.VehicleConfig`.
     pub const VEHICLE_CONFIG: &str = "uavnav.v1.VehicleConfig";
@@ -71,6 +75,8 @@ pub mod names {
     pub const POSE_ESTIMATE: &str = "uavnav.v1.PoseEstimate";
     /// `uavnav.v1.VehicleHealth`.
     pub const VEHICLE_HEALTH: &str = "uavnav.v1.VehicleHealth";
+    /// `uavnav.v1.ListVehiclesResponse`.
+    pub const LIST_VEHICLES_RESPONSE: &str = "uavnav.v1.ListVehiclesResponse";
     /// `uavnav.v1.TruthSample`.
     pub const TRUTH_SAMPLE: &str = "uavnav.v1.TruthSample";
     /// `uavnav.v1.DatasetInfo`.

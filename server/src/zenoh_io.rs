@@ -1,19 +1,8 @@
 //! The embedded Zenoh session: the same actors as gRPC, fed and watched through key expressions.
 //!
-//! | key expression | direction | payload |
-//! |---|---|---|
-//! | `uavnav/v1/vehicle/{id}/imu` | in | `uavnav.v1.ImuBatch` |
-//! | `uavnav/v1/vehicle/{id}/gnss` | in | `uavnav.v1.GnssFix` |
-//! | `uavnav/v1/vehicle/{id}/mag` | in | `uavnav.v1.MagSample` |
-//! | `uavnav/v1/vehicle/{id}/baro` | in | `uavnav.v1.BaroSample` |
-//! | `uavnav/v1/vehicle/{id}/camera` | in | `uavnav.v1.CameraFrame` |
-//! | `uavnav/v1/vehicle/{id}/config` | in | `uavnav.v1.VehicleConfig` |
-//! | `uavnav/v1/vehicle/{id}/pose` | out | `uavnav.v1.PoseEstimate` |
-//! | `uavnav/v1/vehicle/{id}/health` | out | `uavnav.v1.VehicleHealth` |
-//! | `uavnav/v1/vehicle/{id}/pose/latest` | queryable | `uavnav.v1.PoseEstimate` |
-//! | `uavnav/v1/vehicles` | queryable | `uavnav.v1.ListVehiclesResponse` |
-//! | `uavnav/v1/service/{instance}` | liveliness token | — |
-//! | `uavnav/v1/vehicle/{id}/alive` | liveliness token | — |
+//! The key expressions are those of [`uavnav_proto::keys`] (the table is there): the service
+//! subscribes to every vehicle's input leaves, publishes `pose` and `health`, answers the
+//! `pose/latest` and `vehicles` queryables and declares the liveliness tokens.
 //!
 //! Payloads are the protobuf encoding of the message, with Zenoh encoding `application/protobuf`
 //! and the message's full name as schema. Bad input is never answered on Zenoh (there is no reply
@@ -28,7 +17,8 @@ use prost::Message;
 use tokio::sync::{broadcast, mpsc, oneshot};
 use tokio::task::JoinHandle;
 use tracing::{debug, warn};
-use uavnav_proto::v1 as pb;
+use uavnav_proto::keys::{self, Leaf};
+use uavnav_proto::{names, v1 as pb};
 use zenoh::Session;
 use zenoh::bytes::Encoding;
 use zenoh::key_expr::KeyExpr;
@@ -40,26 +30,19 @@ use crate::ingest::{Ingestor, Payload};
 use crate::metrics::{Kind, Outcome, Transport};
 use crate::vehicle::VehicleStats;
 
-/// Key prefix of every vehicle key.
-pub const VEHICLE_PREFIX: &str = "uavnav/v1/vehicle";
-/// Inputs of every vehicle.
-pub const INPUT_KEYS: &str = "uavnav/v1/vehicle/*/*";
-/// The input leaves `uavnav/v1/vehicle/{id}/{leaf}` the service subscribes to, with the metric
-/// kind of each (the client's `keys::Leaf` lists the same; a client test checks they agree).
-pub const INPUT_LEAVES: [(&str, Kind); 6] = [
-    ("imu", Kind::Imu),
-    ("gnss", Kind::Gnss),
-    ("mag", Kind::Mag),
-    ("baro", Kind::Baro),
-    ("camera", Kind::Camera),
-    ("config", Kind::Config),
-];
-/// The latest-pose queryable.
-pub const POSE_LATEST_KEYS: &str = "uavnav/v1/vehicle/*/pose/latest";
-/// The vehicle list queryable.
-pub const VEHICLES_KEY: &str = "uavnav/v1/vehicles";
-/// Prefix of the service liveliness tokens.
-pub const SERVICE_PREFIX: &str = "uavnav/v1/service";
+/// The metric kind of an input leaf (`None` for the outputs, which the input subscription also
+/// matches).
+fn input_kind(leaf: Leaf) -> Option<Kind> {
+    Some(match leaf {
+        Leaf::Imu => Kind::Imu,
+        Leaf::Gnss => Kind::Gnss,
+        Leaf::Mag => Kind::Mag,
+        Leaf::Baro => Kind::Baro,
+        Leaf::Camera => Kind::Camera,
+        Leaf::Config => Kind::Config,
+        Leaf::Pose | Leaf::Health => return None,
+    })
+}
 
 /// Decoder shards: inputs are spread over this many tasks by vehicle id (per-vehicle order kept).
 const SHARDS: usize = 4;
@@ -125,7 +108,7 @@ impl ZenohIo {
         };
         let service_token = session
             .liveliness()
-            .declare_token(format!("{SERVICE_PREFIX}/{instance}"))
+            .declare_token(keys::service_key(&instance))
             .await
             .map_err(|e| anyhow!("declaring the service liveliness token: {e}"))
             .context("zenoh.instance must be a valid key chunk")?;
@@ -188,25 +171,18 @@ fn default_instance() -> String {
     )
 }
 
-/// `uavnav/v1/vehicle/{id}/{leaf}` → (id, leaf).
-fn split_vehicle_key(key: &str) -> Option<(&str, &str)> {
-    let rest = key.strip_prefix(VEHICLE_PREFIX)?.strip_prefix('/')?;
-    let (id, leaf) = rest.split_once('/')?;
-    Some((id, leaf))
-}
-
 /// Input samples buffered between Zenoh's receive thread and the decoding shards.
 const ZENOH_INPUT_BUFFER: usize = 16_384;
 
 async fn spawn_inputs(session: &Session, ingestor: Ingestor) -> anyhow::Result<JoinHandle<()>> {
     let sub = session
-        .declare_subscriber(INPUT_KEYS)
+        .declare_subscriber(keys::EVERY_VEHICLE_LEAF)
         // Zenoh's receive thread blocks when this is full, and a link blocked for longer than
         // Zenoh's `wait_before_close` is closed (what was queued on it is lost): keep a deep
         // buffer between the network and the actors' back-pressure.
         .with(zenoh::handlers::FifoChannel::new(ZENOH_INPUT_BUFFER))
         .await
-        .map_err(|e| anyhow!("subscribing to {INPUT_KEYS}: {e}"))?;
+        .map_err(|e| anyhow!("subscribing to {}: {e}", keys::EVERY_VEHICLE_LEAF))?;
     let max_bytes = ingestor.max_message_bytes();
     let mut shards = Vec::with_capacity(SHARDS);
     let mut shard_tasks = Vec::with_capacity(SHARDS);
@@ -219,7 +195,7 @@ async fn spawn_inputs(session: &Session, ingestor: Ingestor) -> anyhow::Result<J
         let _guard = AbortOnDrop(shard_tasks);
         while let Ok(sample) = sub.recv_async().await {
             let shard =
-                split_vehicle_key(sample.key_expr().as_str()).map_or(0, |(id, _)| shard_of(id));
+                keys::split_vehicle(sample.key_expr().as_str()).map_or(0, |(id, _)| shard_of(id));
             if shards[shard].send(sample).await.is_err() {
                 break;
             }
@@ -249,11 +225,11 @@ async fn decode_loop(
     max_bytes: usize,
 ) {
     while let Some(sample) = rx.recv().await {
-        let Some((id, leaf)) = split_vehicle_key(sample.key_expr().as_str()) else {
+        let Some((id, leaf)) = keys::split(sample.key_expr().as_str()) else {
             continue;
         };
         // Our own outputs match `*/*` too (pose, health): not inputs.
-        let Some(&(_, kind)) = INPUT_LEAVES.iter().find(|(l, _)| *l == leaf) else {
+        let Some(kind) = input_kind(leaf) else {
             continue;
         };
         ingestor.registry().ctx().metrics.zenoh_samples.inc();
@@ -375,13 +351,13 @@ fn reject(ingestor: &Ingestor, id: &str, kind: Kind, outcome: Outcome, reason: &
 
 async fn spawn_queries(session: &Session, ingestor: Ingestor) -> anyhow::Result<JoinHandle<()>> {
     let poses = session
-        .declare_queryable(POSE_LATEST_KEYS)
+        .declare_queryable(keys::EVERY_POSE_LATEST)
         .await
-        .map_err(|e| anyhow!("queryable {POSE_LATEST_KEYS}: {e}"))?;
+        .map_err(|e| anyhow!("queryable {}: {e}", keys::EVERY_POSE_LATEST))?;
     let list = session
-        .declare_queryable(VEHICLES_KEY)
+        .declare_queryable(keys::VEHICLES)
         .await
-        .map_err(|e| anyhow!("queryable {VEHICLES_KEY}: {e}"))?;
+        .map_err(|e| anyhow!("queryable {}: {e}", keys::VEHICLES))?;
     Ok(tokio::spawn(async move {
         loop {
             tokio::select! {
@@ -393,7 +369,7 @@ async fn spawn_queries(session: &Session, ingestor: Ingestor) -> anyhow::Result<
                     Ok(q) => {
                         let vehicles = ingestor.registry().list("").iter().map(crate::grpc::summary_of).collect();
                         let body = pb::ListVehiclesResponse { vehicles }.encode_to_vec();
-                        let _ = q.reply(VEHICLES_KEY, body).encoding(encoding("uavnav.v1.ListVehiclesResponse")).await;
+                        let _ = q.reply(keys::VEHICLES, body).encoding(encoding(names::LIST_VEHICLES_RESPONSE)).await;
                     }
                     Err(_) => break,
                 },
@@ -406,7 +382,7 @@ async fn spawn_queries(session: &Session, ingestor: Ingestor) -> anyhow::Result<
 async fn answer_pose(q: &zenoh::query::Query, ingestor: &Ingestor) {
     let wanted = q.key_expr().clone();
     for h in ingestor.registry().list("") {
-        let key = format!("{VEHICLE_PREFIX}/{}/pose/latest", h.shared.id);
+        let key = keys::pose_latest_key(&h.shared.id);
         let Ok(ke) = KeyExpr::try_from(key.as_str()) else {
             continue;
         };
@@ -416,7 +392,7 @@ async fn answer_pose(q: &zenoh::query::Query, ingestor: &Ingestor) {
         if let Some(p) = h.shared.pose() {
             let _ = q
                 .reply(ke, p.encode_to_vec())
-                .encoding(encoding("uavnav.v1.PoseEstimate"))
+                .encoding(encoding(Leaf::Pose.message_name()))
                 .await;
         }
     }
@@ -436,7 +412,7 @@ fn spawn_liveliness(
                 Ok((id, true)) => {
                     match session
                         .liveliness()
-                        .declare_token(format!("{VEHICLE_PREFIX}/{id}/alive"))
+                        .declare_token(keys::alive_key(&id))
                         .await
                     {
                         Ok(t) => {
@@ -467,12 +443,12 @@ async fn publish_outputs(
     mut done: oneshot::Receiver<()>,
 ) {
     let metrics = ingestor.registry().ctx().metrics.clone();
-    let watched = Subscribers::declare(&session, "pose").await;
-    let health_watched = Subscribers::declare(&session, "health").await;
+    let watched = Subscribers::declare(&session, Leaf::Pose).await;
+    let health_watched = Subscribers::declare(&session, Leaf::Health).await;
     let out = Outputs {
         session,
-        pose_enc: encoding("uavnav.v1.PoseEstimate"),
-        health_enc: encoding("uavnav.v1.VehicleHealth"),
+        pose_enc: encoding(Leaf::Pose.message_name()),
+        health_enc: encoding(Leaf::Health.message_name()),
     };
     loop {
         tokio::select! {
@@ -516,9 +492,9 @@ struct Subscribers {
 }
 
 impl Subscribers {
-    async fn declare(session: &Session, leaf: &str) -> Self {
+    async fn declare(session: &Session, leaf: Leaf) -> Self {
         use std::sync::atomic::{AtomicBool, Ordering};
-        let key = format!("{VEHICLE_PREFIX}/*/{leaf}");
+        let key = keys::vehicle_key("*", leaf);
         let any = Arc::new(AtomicBool::new(true));
         // Remote subscribers only: the service's own input subscriber (`uavnav/v1/vehicle/*/*`)
         // matches this key too, and it never wants poses.
@@ -571,7 +547,7 @@ struct Outputs {
 
 impl Outputs {
     async fn poses(&self, b: &PoseBatch) {
-        let key = format!("{VEHICLE_PREFIX}/{}/pose", b.vehicle_id);
+        let key = keys::vehicle_key(&b.vehicle_id, Leaf::Pose);
         for i in 0..b.poses.len() {
             if let Some(body) = b.encode_wire(i) {
                 self.put(key.clone(), body, &self.pose_enc).await;
@@ -581,7 +557,7 @@ impl Outputs {
 
     async fn health(&self, h: &pb::VehicleHealth) {
         self.put(
-            format!("{VEHICLE_PREFIX}/{}/health", h.vehicle_id),
+            keys::vehicle_key(&h.vehicle_id, Leaf::Health),
             h.encode_to_vec(),
             &self.health_enc,
         )

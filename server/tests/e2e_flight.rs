@@ -10,6 +10,7 @@ use std::time::Duration;
 use common::test_config;
 use prost::Message;
 use uavnav_core::SensorEvent;
+use uavnav_proto::keys::{self, Leaf};
 use uavnav_proto::v1 as pb;
 use uavnavd::Server;
 
@@ -126,48 +127,31 @@ async fn zenoh_flight_equals_offline_estimate() {
         .unwrap();
     let z = zenoh::open(zc).await.unwrap();
     tokio::time::sleep(Duration::from_millis(500)).await;
-    let key = |leaf: &str| format!("uavnav/v1/vehicle/ze2e/{leaf}");
-    let enc = uavnavd::zenoh_io::encoding;
+    let key = |leaf: Leaf| keys::vehicle_key("ze2e", leaf);
+    let enc = |leaf: Leaf| uavnavd::zenoh_io::encoding(leaf.message_name());
     let block = zenoh::qos::CongestionControl::Block;
     let cfg_msg = pb::VehicleConfig::from(&config);
-    z.put(key("config"), cfg_msg.encode_to_vec())
-        .encoding(enc("uavnav.v1.VehicleConfig"))
+    z.put(key(Leaf::Config), cfg_msg.encode_to_vec())
+        .encoding(enc(Leaf::Config))
         .congestion_control(block)
         .await
         .unwrap();
     for e in &events {
-        let (leaf, body, name) = match e {
+        let (leaf, body) = match e {
             SensorEvent::Imu(s) => (
-                "imu",
+                Leaf::Imu,
                 pb::ImuBatch {
                     samples: vec![s.into()],
                 }
                 .encode_to_vec(),
-                "uavnav.v1.ImuBatch",
             ),
-            SensorEvent::Gnss(f) => (
-                "gnss",
-                pb::GnssFix::from(f).encode_to_vec(),
-                "uavnav.v1.GnssFix",
-            ),
-            SensorEvent::Mag(m) => (
-                "mag",
-                pb::MagSample::from(m).encode_to_vec(),
-                "uavnav.v1.MagSample",
-            ),
-            SensorEvent::Baro(b) => (
-                "baro",
-                pb::BaroSample::from(b).encode_to_vec(),
-                "uavnav.v1.BaroSample",
-            ),
-            SensorEvent::Camera(f) => (
-                "camera",
-                pb::CameraFrame::from(f).encode_to_vec(),
-                "uavnav.v1.CameraFrame",
-            ),
+            SensorEvent::Gnss(f) => (Leaf::Gnss, pb::GnssFix::from(f).encode_to_vec()),
+            SensorEvent::Mag(m) => (Leaf::Mag, pb::MagSample::from(m).encode_to_vec()),
+            SensorEvent::Baro(b) => (Leaf::Baro, pb::BaroSample::from(b).encode_to_vec()),
+            SensorEvent::Camera(f) => (Leaf::Camera, pb::CameraFrame::from(f).encode_to_vec()),
         };
         z.put(key(leaf), body)
-            .encoding(enc(name))
+            .encoding(enc(leaf))
             .congestion_control(block)
             .await
             .unwrap();

@@ -10,6 +10,7 @@ use std::time::Duration;
 
 use common::*;
 use prost::Message;
+use uavnav_proto::keys::{self, Leaf};
 use uavnav_proto::v1 as pb;
 use zenoh::Wait;
 
@@ -41,18 +42,18 @@ async fn zenoh_round_trip() {
     let server = start(cfg).await;
     let z = peer(&endpoint).await;
     let poses = z
-        .declare_subscriber("uavnav/v1/vehicle/zv/pose")
+        .declare_subscriber(keys::vehicle_key("zv", Leaf::Pose))
         .await
         .unwrap();
     let health = z
-        .declare_subscriber("uavnav/v1/vehicle/zv/health")
+        .declare_subscriber(keys::vehicle_key("zv", Leaf::Health))
         .await
         .unwrap();
     // Let the subscriptions propagate to the service.
     tokio::time::sleep(Duration::from_millis(500)).await;
     let alive = z
         .liveliness()
-        .get(format!("uavnav/v1/service/test-{port}"))
+        .get(keys::service_key(&format!("test-{port}")))
         .await
         .unwrap();
     assert!(
@@ -63,12 +64,12 @@ async fn zenoh_round_trip() {
         "service token"
     );
 
-    let key = |leaf: &str| format!("uavnav/v1/vehicle/zv/{leaf}");
-    z.put(key("config"), vehicle_config(false).encode_to_vec())
+    let key = |leaf: Leaf| keys::vehicle_key("zv", leaf);
+    z.put(key(Leaf::Config), vehicle_config(false).encode_to_vec())
         .encoding(enc("uavnav.v1.VehicleConfig"))
         .await
         .unwrap();
-    z.put(key("gnss"), fix(1_000).encode_to_vec())
+    z.put(key(Leaf::Gnss), fix(1_000).encode_to_vec())
         .encoding(enc("uavnav.v1.GnssFix"))
         .await
         .unwrap();
@@ -77,13 +78,15 @@ async fn zenoh_round_trip() {
         let batch = pb::ImuBatch {
             samples: vec![imu(2_000 + k * 5_000_000)],
         };
-        z.put(key("imu"), batch.encode_to_vec())
+        z.put(key(Leaf::Imu), batch.encode_to_vec())
             .encoding(enc("uavnav.v1.ImuBatch"))
             .await
             .unwrap();
     }
     // Garbage on an input key is counted, not fatal.
-    z.put(key("imu"), vec![0x0A, 0xFF, 0x01]).wait().unwrap();
+    z.put(key(Leaf::Imu), vec![0x0A, 0xFF, 0x01])
+        .wait()
+        .unwrap();
 
     let mut got = Vec::new();
     while got.len() < n as usize {
@@ -128,7 +131,7 @@ async fn zenoh_round_trip() {
     );
 
     // Queryables.
-    let replies = z.get("uavnav/v1/vehicle/zv/pose/latest").await.unwrap();
+    let replies = z.get(keys::pose_latest_key("zv")).await.unwrap();
     let r = tokio::time::timeout(Duration::from_secs(3), replies.recv_async())
         .await
         .unwrap()
@@ -141,7 +144,7 @@ async fn zenoh_round_trip() {
             .t_ns,
         2_000 + (n - 1) * 5_000_000
     );
-    let replies = z.get("uavnav/v1/vehicles").await.unwrap();
+    let replies = z.get(keys::VEHICLES).await.unwrap();
     let r = tokio::time::timeout(Duration::from_secs(3), replies.recv_async())
         .await
         .unwrap()
@@ -155,11 +158,7 @@ async fn zenoh_round_trip() {
             .collect::<Vec<_>>(),
         ["zv"]
     );
-    let alive = z
-        .liveliness()
-        .get("uavnav/v1/vehicle/zv/alive")
-        .await
-        .unwrap();
+    let alive = z.liveliness().get(keys::alive_key("zv")).await.unwrap();
     assert!(
         tokio::time::timeout(Duration::from_secs(3), alive.recv_async())
             .await

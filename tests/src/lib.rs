@@ -18,10 +18,13 @@
 //!   equals the offline estimate (`e2e_flight.rs`), every bad-input case (`bad_input.rs`), many
 //!   vehicles and HTTP endpoints (`fleet.rs`), Zenoh keys/queryables/liveliness (`zenoh.rs`),
 //!   shutdown drain and eviction (`shutdown.rs`), configuration precedence (`config_precedence.rs`);
-//! - `client/tests/`: `library.rs` (the client library over gRPC and Zenoh), `cli.rs` (each online
-//!   CLI subcommand against an in-process server, `watch --foxglove` included), `loadtest.rs` (the
-//!   load generator against the service and the discard sink, the JSON report field by field),
-//!   `recording.rs` (record → replay gives the same poses); helpers in `common/`;
+//! - `client/tests/`: `library.rs` (the client library over gRPC and Zenoh against an in-process
+//!   server), `recording_reader.rs` (the library's MCAP recording reader on files of the dataset
+//!   writer and of the service's recorder); helpers in `common/`;
+//! - `cli/tests/`: `cli.rs` (each online CLI subcommand against an in-process server, `watch
+//!   --foxglove` included), `loadtest.rs` (the load generator against the service and the discard
+//!   sink, the JSON report field by field), `recording.rs` (record → replay gives the same poses),
+//!   `logs.rs` (flight logs through `convert` and `estimate`); helpers in `common/`;
 //! - `runner/tests/`, `estimator/tests/`, `vision/tests/`, `dataset/tests/`, `sim/tests/`: the pure
 //!   crates' scenario, property, Jacobian, golden and real-data tests;
 //! - `docker/test.sh`: the compose deployment (run by `.ci/run` when a Docker engine is present).

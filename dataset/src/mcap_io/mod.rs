@@ -2,25 +2,8 @@
 //!
 //! ## Topics
 //!
-//! | topic | schema | content |
-//! |---|---|---|
-//! | `/uavnav/{vehicle}/imu` | `uavnav.v1.ImuBatch` | IMU samples (one sample per message when written here) |
-//! | `/uavnav/{vehicle}/gnss` | `uavnav.v1.GnssFix` | GNSS fixes |
-//! | `/uavnav/{vehicle}/gnss/location` | `foxglove.LocationFix` | the same fixes for Foxglove's map (display only, ignored when reading) |
-//! | `/uavnav/{vehicle}/mag` | `uavnav.v1.MagSample` | magnetometer samples (tesla, magnetometer frame) |
-//! | `/uavnav/{vehicle}/baro` | `uavnav.v1.BaroSample` | barometer samples |
-//! | `/uavnav/{vehicle}/camera` | `foxglove.CompressedImage` | camera frames: `frame_id` = `cam{id}`, `timestamp` = `t_ns` |
-//! | `/uavnav/{vehicle}/config` | `uavnav.v1.VehicleConfig` | the vehicle configuration |
-//! | `/uavnav/{vehicle}/info` | `uavnav.v1.DatasetInfo` | the truth's NED origin |
-//! | `/uavnav/{vehicle}/truth` | `uavnav.v1.TruthSample` | ground truth |
-//! | `/uavnav/{vehicle}/reference` | `uavnav.v1.TruthSample` | another estimator's output, not truth (a flight log's autopilot EKF); channel metadata `reference` names it |
-//! | `/uavnav/{vehicle}/pose` | `uavnav.v1.PoseEstimate` | estimator output |
-//! | `/uavnav/{vehicle}/pose/frame` | `foxglove.PoseInFrame` | the same poses for Foxglove's 3-D panel |
-//! | `/uavnav/{vehicle}/health` | `uavnav.v1.VehicleHealth` | health reports |
-//!
-//! Vehicle ids never contain `/`. Camera frames are stored as plain `foxglove.CompressedImage`
-//! (not wrapped in `uavnav.v1.CameraFrame`), so the image panel shows them without duplicating the
-//! bytes; the image carries everything a `CameraFrame` does.
+//! The topics (`/uavnav/{vehicle}/{stream}`, one channel per vehicle and stream) are those of
+//! [`uavnav_proto::topics`], re-exported here: [`Stream`], [`topic`], [`parse_topic`] (the table is there).
 //!
 //! ## Times
 //!
@@ -38,113 +21,8 @@ use std::collections::BTreeSet;
 
 use prost::Message;
 use prost_types::FileDescriptorSet;
-use uavnav_proto::{FILE_DESCRIPTOR_SET, names};
-
-/// The streams of one vehicle.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub enum Stream {
-    /// `imu`
-    Imu,
-    /// `gnss`
-    Gnss,
-    /// `gnss/location` (display)
-    GnssLocation,
-    /// `mag`
-    Mag,
-    /// `baro`
-    Baro,
-    /// `camera`
-    Camera,
-    /// `config`
-    Config,
-    /// `info`
-    Info,
-    /// `truth`
-    Truth,
-    /// `reference` (not truth)
-    Reference,
-    /// `pose`
-    Pose,
-    /// `pose/frame` (display)
-    PoseFrame,
-    /// `health`
-    Health,
-}
-
-/// Every stream, for lookups.
-const STREAMS: [Stream; 13] = [
-    Stream::Imu,
-    Stream::Gnss,
-    Stream::GnssLocation,
-    Stream::Mag,
-    Stream::Baro,
-    Stream::Camera,
-    Stream::Config,
-    Stream::Info,
-    Stream::Truth,
-    Stream::Reference,
-    Stream::Pose,
-    Stream::PoseFrame,
-    Stream::Health,
-];
-
-/// The topic prefix.
-pub const TOPIC_PREFIX: &str = "/uavnav/";
-
-/// The channel metadata key naming what produced a `reference` stream (`EKF1`, ...).
-pub const REFERENCE_METADATA_KEY: &str = "reference";
-
-impl Stream {
-    /// The topic suffix after `/uavnav/{vehicle}/`.
-    pub fn suffix(self) -> &'static str {
-        match self {
-            Stream::Imu => "imu",
-            Stream::Gnss => "gnss",
-            Stream::GnssLocation => "gnss/location",
-            Stream::Mag => "mag",
-            Stream::Baro => "baro",
-            Stream::Camera => "camera",
-            Stream::Config => "config",
-            Stream::Info => "info",
-            Stream::Truth => "truth",
-            Stream::Reference => "reference",
-            Stream::Pose => "pose",
-            Stream::PoseFrame => "pose/frame",
-            Stream::Health => "health",
-        }
-    }
-
-    /// The protobuf message (schema) name.
-    pub fn schema(self) -> &'static str {
-        match self {
-            Stream::Imu => names::IMU_BATCH,
-            Stream::Gnss => names::GNSS_FIX,
-            Stream::GnssLocation => names::FOXGLOVE_LOCATION_FIX,
-            Stream::Mag => names::MAG_SAMPLE,
-            Stream::Baro => names::BARO_SAMPLE,
-            Stream::Camera => names::FOXGLOVE_COMPRESSED_IMAGE,
-            Stream::Config => names::VEHICLE_CONFIG,
-            Stream::Info => names::DATASET_INFO,
-            Stream::Truth | Stream::Reference => names::TRUTH_SAMPLE,
-            Stream::Pose => names::POSE_ESTIMATE,
-            Stream::PoseFrame => names::FOXGLOVE_POSE_IN_FRAME,
-            Stream::Health => names::VEHICLE_HEALTH,
-        }
-    }
-}
-
-/// `/uavnav/{vehicle}/{stream}`.
-pub fn topic(vehicle: &str, stream: Stream) -> String {
-    format!("{TOPIC_PREFIX}{vehicle}/{}", stream.suffix())
-}
-
-/// Splits a topic into vehicle and stream; `None` for foreign topics.
-pub fn parse_topic(topic: &str) -> Option<(&str, Stream)> {
-    let rest = topic.strip_prefix(TOPIC_PREFIX)?;
-    let (vehicle, suffix) = rest.split_once('/')?;
-    let stream = STREAMS.into_iter().find(|s| s.suffix() == suffix)?;
-    (!vehicle.is_empty()).then_some((vehicle, stream))
-}
+use uavnav_proto::FILE_DESCRIPTOR_SET;
+pub use uavnav_proto::topics::{REFERENCE_METADATA_KEY, Stream, TOPIC_PREFIX, parse_topic, topic};
 
 /// The MCAP `protobuf` schema data for a message: a `FileDescriptorSet` holding the file that
 /// defines it and everything it imports (source info stripped to keep recordings small).
@@ -183,19 +61,8 @@ mod tests {
     use super::*;
 
     #[test]
-    fn topics_round_trip() {
-        for s in STREAMS {
-            let t = topic("uav-7", s);
-            assert_eq!(parse_topic(&t), Some(("uav-7", s)));
-        }
-        assert_eq!(topic("a", Stream::GnssLocation), "/uavnav/a/gnss/location");
-        assert_eq!(parse_topic("/other/a/imu"), None);
-        assert_eq!(parse_topic("/uavnav/a/unknown"), None);
-    }
-
-    #[test]
     fn schemas_exist_and_are_self_contained() {
-        for s in STREAMS {
+        for s in Stream::ALL {
             let data = schema_data(s.schema()).unwrap();
             let fds = FileDescriptorSet::decode(data.as_slice()).unwrap();
             let names: Vec<_> = fds.file.iter().map(|f| f.name().to_owned()).collect();

@@ -356,28 +356,7 @@ fn camera_frame(
     image: &foxglove::messages::CompressedImage,
     publish_time: u64,
 ) -> Result<CameraFrame, ConvertError> {
-    let camera_id = image
-        .frame_id
-        .strip_prefix("cam")
-        .and_then(|n| n.parse::<u32>().ok())
-        .ok_or_else(|| ConvertError::Invalid {
-            field: "frame_id".into(),
-            reason: format!("'{}' is not cam<N>", image.frame_id),
-        })?;
-    // The image timestamp is the time of validity; fall back to the publish time without one.
-    let t_ns = match &image.timestamp {
-        Some(ts) => i64::try_from(ts.total_nanos()),
-        None => i64::try_from(publish_time),
-    }
-    .map_err(|_| ConvertError::Invalid {
-        field: "timestamp".into(),
-        reason: "beyond i64 ns".into(),
-    })?;
-    let wire = v1::CameraFrame {
-        t_ns,
-        camera_id,
-        image: Some(image.clone()),
-    };
+    let wire = uavnav_proto::topics::camera_frame_from_image(image.clone(), publish_time)?;
     let frame = CameraFrame::try_from(&wire)?;
     debug_assert!(matches!(frame.format, ImageFormat::Jpeg | ImageFormat::Png));
     Ok(frame)

@@ -7,7 +7,7 @@
 
 use uavnav_core::{LocalFrame, PoseOutput};
 
-use crate::pb;
+use uavnav_client::pb;
 
 /// The CSV header: the `estimate` columns, then `vehicle_id`.
 pub fn csv_header() -> String {

@@ -4,7 +4,7 @@
 //! Each vehicle replays the same stream (by default a simulated smoke flight made in memory; or a
 //! recording) under its own id, starting at a staggered offset. Latency is ingest-to-pose from each
 //! message's scheduled send time (coordinated-omission correct, HDR histogram); see
-//! `uavnav_client::load`. `--to discard` measures the generator alone. Exit 3 when the service
+//! `uavnav_cli::load`. `--to discard` measures the generator alone. Exit 3 when the service
 //! falls behind real time (latency, send lag, or any camera frame shed by the service) or errors
 //! pass the threshold; `--ramp` doubles N from `--vehicles` until
 //! it falls behind, bisects, and reports the largest N sustained.
@@ -16,9 +16,9 @@ use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use anyhow::Context;
-use uavnav_client::load::{self, Live, LoadOutcome, LoadParams, Recording, Thresholds};
-use uavnav_client::report::Report;
-use uavnav_client::schedule::{self, ScheduleParams};
+use uavnav_cli::load::{self, Live, LoadOutcome, LoadParams, Recording, Thresholds};
+use uavnav_cli::report::Report;
+use uavnav_cli::schedule::{self, ScheduleParams};
 use uavnav_client::{Client, pb};
 
 use crate::common::{CliError, CliResult, progress};

@@ -7,8 +7,8 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use common::*;
+use uavnav_cli::load::{self, Live, LoadParams, Recording};
 use uavnav_client::Client;
-use uavnav_client::load::{self, Live, LoadParams, Recording};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn loadtest_measures_against_the_service_and_the_discard_sink() {

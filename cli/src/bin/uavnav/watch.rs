@@ -17,8 +17,9 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::Context;
+use uavnav_cli::posefmt;
 use uavnav_client::keys::Leaf;
-use uavnav_client::{Selector, pb, posefmt};
+use uavnav_client::{Selector, pb};
 use uavnav_core::LocalFrame;
 use uavnav_liveview::{LiveTap, LiveView};
 

@@ -3,8 +3,8 @@
 
 use uavnav_core::{ImuSample, SensorEvent};
 
-use crate::pb;
-use crate::pb::sensor_envelope::Payload;
+use uavnav_client::pb;
+use uavnav_client::pb::sensor_envelope::Payload;
 
 /// One message of a vehicle's stream.
 #[derive(Debug, Clone)]

@@ -17,13 +17,11 @@ use futures::FutureExt;
 use hdrhistogram::Histogram;
 use tokio::task::JoinHandle;
 
-use crate::client::Client;
-use crate::error::ClientError;
-use crate::ingest::IngestSender;
-use crate::pb;
-use crate::pb::sensor_envelope::Payload;
 use crate::schedule::{TimedMessage, shift_payload};
-use crate::watch::Selector;
+use uavnav_client::Selector;
+use uavnav_client::pb;
+use uavnav_client::pb::sensor_envelope::Payload;
+use uavnav_client::{Client, ClientError, IngestSender};
 
 /// What one sender task returns: its latency histogram, (vehicle, last t_ns) pairs, messages sent.
 type SenderResult = (Histogram<u64>, Vec<(usize, i64)>, u64);
@@ -379,7 +377,7 @@ pub async fn run(
     params: LoadParams,
     live: Arc<Live>,
 ) -> Result<LoadOutcome, ClientError> {
-    let expects_poses = !matches!(client.endpoint(), crate::Endpoint::Discard);
+    let expects_poses = !matches!(client.endpoint(), uavnav_client::Endpoint::Discard);
     let sel = Selector::prefix(params.id_prefix.clone()).with_decimation(params.decimation);
     let mut poses = client.watch_poses(sel.clone()).await?;
     let mut health = client
@@ -518,7 +516,7 @@ pub async fn run(
         for (k, v) in s.errors() {
             *outcome.errors.entry(k).or_default() += v;
         }
-        if matches!(client.endpoint(), crate::Endpoint::Grpc { .. }) {
+        if matches!(client.endpoint(), uavnav_client::Endpoint::Grpc { .. }) {
             outcome.unacked += s
                 .sent
                 .load(Ordering::Relaxed)

@@ -12,7 +12,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use nalgebra::Vector3;
-use uavnav_client::{Client, Selector, pb, posefmt, schedule};
+use uavnav_cli::{posefmt, schedule};
+use uavnav_client::{Client, Selector, pb};
 use uavnav_core::{LocalFrame, SensorEvent, TruthSample};
 use uavnav_report::accuracy::{attitude_rmse, truth_at};
 use uavnav_runner::{PoseOutput, RunnerParams, VehicleRunner};

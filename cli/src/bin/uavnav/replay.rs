@@ -11,7 +11,7 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use tokio::sync::mpsc;
-use uavnav_client::schedule::{Batcher, ScheduleParams, TimedMessage};
+use uavnav_cli::schedule::{Batcher, ScheduleParams, TimedMessage};
 use uavnav_client::{IngestSender, pb};
 
 use crate::common::{CliError, CliResult};

@@ -1,0 +1,213 @@
+//! The service's Zenoh key expressions, written once for the service and its clients (plain
+//! strings: this crate does not depend on Zenoh).
+//!
+//! | key expression | direction | payload |
+//! |---|---|---|
+//! | `uavnav/v1/vehicle/{id}/imu` | in | `uavnav.v1.ImuBatch` |
+//! | `uavnav/v1/vehicle/{id}/gnss` | in | `uavnav.v1.GnssFix` |
+//! | `uavnav/v1/vehicle/{id}/mag` | in | `uavnav.v1.MagSample` |
+//! | `uavnav/v1/vehicle/{id}/baro` | in | `uavnav.v1.BaroSample` |
+//! | `uavnav/v1/vehicle/{id}/camera` | in | `uavnav.v1.CameraFrame` |
+//! | `uavnav/v1/vehicle/{id}/config` | in | `uavnav.v1.VehicleConfig` |
+//! | `uavnav/v1/vehicle/{id}/pose` | out | `uavnav.v1.PoseEstimate` |
+//! | `uavnav/v1/vehicle/{id}/health` | out | `uavnav.v1.VehicleHealth` |
+//! | `uavnav/v1/vehicle/{id}/pose/latest` | queryable | `uavnav.v1.PoseEstimate` |
+//! | `uavnav/v1/vehicles` | queryable | `uavnav.v1.ListVehiclesResponse` |
+//! | `uavnav/v1/service/{instance}` | liveliness token | — |
+//! | `uavnav/v1/vehicle/{id}/alive` | liveliness token | — |
+//!
+//! Payloads are the protobuf encoding of the message, with Zenoh encoding `application/protobuf`
+//! and the message's full name ([`Leaf::message_name`]) as schema.
+
+use crate::names;
+
+/// Prefix of every vehicle key.
+pub const VEHICLE_PREFIX: &str = "uavnav/v1/vehicle";
+/// The vehicle-list queryable.
+pub const VEHICLES: &str = "uavnav/v1/vehicles";
+/// Prefix of the service liveliness tokens.
+pub const SERVICE_PREFIX: &str = "uavnav/v1/service";
+/// Every key under every vehicle (inputs, outputs, queryables, liveliness).
+pub const ALL_VEHICLE_KEYS: &str = "uavnav/v1/vehicle/**";
+/// Every `{leaf}` of every vehicle (the service's input subscription; it also matches the
+/// `pose` and `health` outputs, which the service skips).
+pub const EVERY_VEHICLE_LEAF: &str = "uavnav/v1/vehicle/*/*";
+/// The latest-pose queryables of every vehicle.
+pub const EVERY_POSE_LATEST: &str = "uavnav/v1/vehicle/*/pose/latest";
+
+/// Leaf of each input and output of a vehicle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Leaf {
+    /// `uavnav.v1.ImuBatch` input.
+    Imu,
+    /// `uavnav.v1.GnssFix` input.
+    Gnss,
+    /// `uavnav.v1.MagSample` input.
+    Mag,
+    /// `uavnav.v1.BaroSample` input.
+    Baro,
+    /// `uavnav.v1.CameraFrame` input.
+    Camera,
+    /// `uavnav.v1.VehicleConfig` input.
+    Config,
+    /// `uavnav.v1.PoseEstimate` output.
+    Pose,
+    /// `uavnav.v1.VehicleHealth` output.
+    Health,
+}
+
+impl Leaf {
+    /// The input leaves (what a sender publishes), in the service's tie order.
+    pub const INPUTS: [Leaf; 6] = [
+        Leaf::Imu,
+        Leaf::Gnss,
+        Leaf::Mag,
+        Leaf::Baro,
+        Leaf::Camera,
+        Leaf::Config,
+    ];
+
+    /// The output leaves (what the service publishes).
+    pub const OUTPUTS: [Leaf; 2] = [Leaf::Pose, Leaf::Health];
+
+    /// The key chunk.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Leaf::Imu => "imu",
+            Leaf::Gnss => "gnss",
+            Leaf::Mag => "mag",
+            Leaf::Baro => "baro",
+            Leaf::Camera => "camera",
+            Leaf::Config => "config",
+            Leaf::Pose => "pose",
+            Leaf::Health => "health",
+        }
+    }
+
+    /// The full protobuf name of the payload (Zenoh encoding schema, MCAP schema name).
+    pub fn message_name(self) -> &'static str {
+        match self {
+            Leaf::Imu => names::IMU_BATCH,
+            Leaf::Gnss => names::GNSS_FIX,
+            Leaf::Mag => names::MAG_SAMPLE,
+            Leaf::Baro => names::BARO_SAMPLE,
+            Leaf::Camera => names::CAMERA_FRAME,
+            Leaf::Config => names::VEHICLE_CONFIG,
+            Leaf::Pose => names::POSE_ESTIMATE,
+            Leaf::Health => names::VEHICLE_HEALTH,
+        }
+    }
+
+    /// Whether a sender publishes it (an input of the service).
+    pub fn is_input(self) -> bool {
+        !matches!(self, Leaf::Pose | Leaf::Health)
+    }
+
+    /// Parses a key chunk.
+    pub fn parse(s: &str) -> Option<Leaf> {
+        Some(match s {
+            "imu" => Leaf::Imu,
+            "gnss" => Leaf::Gnss,
+            "mag" => Leaf::Mag,
+            "baro" => Leaf::Baro,
+            "camera" => Leaf::Camera,
+            "config" => Leaf::Config,
+            "pose" => Leaf::Pose,
+            "health" => Leaf::Health,
+            _ => return None,
+        })
+    }
+}
+
+/// `uavnav/v1/vehicle/{id}/{leaf}` (`id` may be `*`).
+pub fn vehicle_key(id: &str, leaf: Leaf) -> String {
+    format!("{VEHICLE_PREFIX}/{id}/{}", leaf.as_str())
+}
+
+/// `uavnav/v1/vehicle/{id}/pose/latest` (the latest-pose queryable).
+pub fn pose_latest_key(id: &str) -> String {
+    format!("{VEHICLE_PREFIX}/{id}/pose/latest")
+}
+
+/// `uavnav/v1/vehicle/{id}/alive` (the vehicle's liveliness token).
+pub fn alive_key(id: &str) -> String {
+    format!("{VEHICLE_PREFIX}/{id}/alive")
+}
+
+/// `uavnav/v1/service/{instance}` (a service's liveliness token).
+pub fn service_key(instance: &str) -> String {
+    format!("{SERVICE_PREFIX}/{instance}")
+}
+
+/// `uavnav/v1/vehicle/{id}/{rest}` → (id, rest), for any vehicle key.
+pub fn split_vehicle(key: &str) -> Option<(&str, &str)> {
+    let rest = key.strip_prefix(VEHICLE_PREFIX)?.strip_prefix('/')?;
+    rest.split_once('/')
+}
+
+/// `uavnav/v1/vehicle/{id}/{leaf}` → (id, leaf); `None` for other keys (e.g. `pose/latest`, `alive`).
+pub fn split(key: &str) -> Option<(&str, Leaf)> {
+    let (id, leaf) = split_vehicle(key)?;
+    Some((id, Leaf::parse(leaf)?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const ALL: [Leaf; 8] = [
+        Leaf::Imu,
+        Leaf::Gnss,
+        Leaf::Mag,
+        Leaf::Baro,
+        Leaf::Camera,
+        Leaf::Config,
+        Leaf::Pose,
+        Leaf::Health,
+    ];
+
+    /// The wire contract: these strings are what deployed senders and ground stations use.
+    #[test]
+    fn keys_are_the_documented_strings() {
+        assert_eq!(
+            vehicle_key("uav-7", Leaf::Imu),
+            "uavnav/v1/vehicle/uav-7/imu"
+        );
+        assert_eq!(vehicle_key("*", Leaf::Pose), "uavnav/v1/vehicle/*/pose");
+        assert_eq!(pose_latest_key("a"), "uavnav/v1/vehicle/a/pose/latest");
+        assert_eq!(pose_latest_key("*"), EVERY_POSE_LATEST);
+        assert_eq!(alive_key("a"), "uavnav/v1/vehicle/a/alive");
+        assert_eq!(service_key("host-1"), "uavnav/v1/service/host-1");
+        assert_eq!(VEHICLES, "uavnav/v1/vehicles");
+        assert_eq!(ALL_VEHICLE_KEYS, format!("{VEHICLE_PREFIX}/**"));
+        assert_eq!(EVERY_VEHICLE_LEAF, format!("{VEHICLE_PREFIX}/*/*"));
+        let chunks: Vec<&str> = ALL.iter().map(|l| l.as_str()).collect();
+        assert_eq!(
+            chunks,
+            [
+                "imu", "gnss", "mag", "baro", "camera", "config", "pose", "health"
+            ]
+        );
+        assert_eq!(Leaf::Camera.message_name(), "uavnav.v1.CameraFrame");
+        assert_eq!(Leaf::Health.message_name(), "uavnav.v1.VehicleHealth");
+    }
+
+    #[test]
+    fn keys_round_trip() {
+        for leaf in ALL {
+            assert_eq!(split(&vehicle_key("uav-7", leaf)), Some(("uav-7", leaf)));
+            assert_eq!(Leaf::parse(leaf.as_str()), Some(leaf));
+            assert_eq!(
+                leaf.is_input(),
+                Leaf::INPUTS.contains(&leaf),
+                "{leaf:?} is an input or an output"
+            );
+            assert_ne!(Leaf::INPUTS.contains(&leaf), Leaf::OUTPUTS.contains(&leaf));
+        }
+        assert_eq!(split(&pose_latest_key("a")), None);
+        assert_eq!(split(&alive_key("a")), None);
+        assert_eq!(split_vehicle(&alive_key("a")), Some(("a", "alive")));
+        assert_eq!(split("uavnav/v1/vehicles"), None);
+        assert_eq!(split("other/v1/vehicle/a/imu"), None);
+    }
+}
