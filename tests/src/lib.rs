@@ -1,13 +1,15 @@
 //! The workspace's test support and test map.
 //!
-//! Support (a dev-dependency of the crates whose tests use it; it depends on core, proto and sim,
-//! never on the service, so the service's own tests can use it without a dependency cycle):
+//! Support (a dev-dependency of the crates whose tests use it; it depends on core, proto, sim and
+//! the service — the service's own integration tests link the same `uavnavd` library, so the
+//! dev-dependency cycle is harmless):
 //!
 //! | item | what it gives |
 //! |---|---|
 //! | [`shared_data`] | the shared real data beside the workspace, or why a test skips |
 //! | [`wire`] | wire-message builders: IMU, GNSS, magnetometer, barometer samples, envelopes, a vehicle configuration, a minimal JPEG header |
 //! | [`net`] | a free loopback port, `eventually` (poll a condition with a timeout) |
+//! | [`service`] | an in-process `uavnavd` on loopback (gRPC/HTTP port 0, Zenoh on a free port) with its client URLs |
 //! | [`flight`] | a shipped scenario's first seconds as sensor events with its vehicle configuration |
 //!
 //! Map:
@@ -31,6 +33,7 @@
 
 pub mod flight;
 pub mod net;
+pub mod service;
 pub mod wire;
 
 use std::path::PathBuf;

@@ -12,42 +12,10 @@ use uavnav_client::{Client, pb};
 
 pub const BIN: &str = env!("CARGO_BIN_EXE_uavnav");
 
-/// A free localhost TCP port for Zenoh (bind 0, read, release).
-pub fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-pub struct Svc {
-    pub server: uavnavd::RunningServer,
-    pub grpc: String,
-    pub zenoh: String,
-}
-
-pub async fn start() -> Svc {
-    let mut c = uavnavd::Config::default();
-    c.grpc.addr = "127.0.0.1:0".parse().unwrap();
-    c.http.addr = "127.0.0.1:0".parse().unwrap();
-    let port = free_port();
-    c.zenoh.listen = vec![format!("tcp/127.0.0.1:{port}")];
-    c.zenoh.multicast_scouting = false;
-    c.health.period_ms = 200;
-    let server = uavnavd::Server::start(c).await.unwrap();
-    let grpc = format!("grpc://{}", server.grpc_addr);
-    Svc {
-        server,
-        grpc,
-        zenoh: format!("zenoh/tcp/127.0.0.1:{port}"),
-    }
-}
-
-pub fn smoke_text() -> String {
-    std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/smoke.toml"))
-        .unwrap()
-}
+#[allow(unused_imports)] // each test file uses a different part
+pub use uavnav_tests::net::free_port;
+#[allow(unused_imports)]
+pub use uavnav_tests::service::{Svc, smoke_text, start};
 
 /// A short smoke flight without camera: its wire configuration and its schedule.
 pub fn flight(duration_s: f64) -> (pb::VehicleConfig, Vec<TimedMessage>) {
