@@ -65,7 +65,7 @@ impl RunnerEngine {
         if let Some(p) = step.poses.last() {
             self.last_t_ns = p.t_ns;
         }
-        out.extend(step.poses.iter().map(pose_of));
+        out.extend(step.poses.iter().map(compact_pose));
         step.job.take().map(vision_work)
     }
 
@@ -195,12 +195,8 @@ fn innovation(h: &Health) -> pb::InnovationRatios {
     }
 }
 
-/// Estimator pose → the service's compact pose (`uavnav_proto::compact::compact_pose`).
-pub fn pose_of(p: &PoseOutput) -> Pose {
-    compact_pose(p)
-}
-
-/// Estimator pose → wire (without `vehicle_id` and `ingest_wall_ns`).
+/// Estimator pose → the service's wire pose (its compact form; without `vehicle_id` and
+/// `ingest_wall_ns`).
 pub fn pose_to_wire(p: &PoseOutput) -> pb::PoseEstimate {
-    pose_of(p).to_wire("")
+    compact_pose(p).to_wire("")
 }
