@@ -59,54 +59,6 @@ fn envelope(id: &str, batch: &[u8]) -> Vec<u8> {
     e
 }
 
-/// Sends raw encoded envelopes on one Ingest stream (the client allocates nothing per sample).
-#[derive(Debug, Clone, Default)]
-struct RawCodec;
-#[derive(Debug)]
-struct RawEncoder;
-#[derive(Debug)]
-struct AckDecoder;
-
-impl tonic::codec::Codec for RawCodec {
-    type Encode = Vec<u8>;
-    type Decode = pb::IngestAck;
-    type Encoder = RawEncoder;
-    type Decoder = AckDecoder;
-    fn encoder(&mut self) -> RawEncoder {
-        RawEncoder
-    }
-    fn decoder(&mut self) -> AckDecoder {
-        AckDecoder
-    }
-}
-
-impl tonic::codec::Encoder for RawEncoder {
-    type Item = Vec<u8>;
-    type Error = tonic::Status;
-    fn encode(
-        &mut self,
-        item: Vec<u8>,
-        dst: &mut tonic::codec::EncodeBuf<'_>,
-    ) -> Result<(), tonic::Status> {
-        use bytes::BufMut;
-        dst.put_slice(&item);
-        Ok(())
-    }
-}
-
-impl tonic::codec::Decoder for AckDecoder {
-    type Item = pb::IngestAck;
-    type Error = tonic::Status;
-    fn decode(
-        &mut self,
-        src: &mut tonic::codec::DecodeBuf<'_>,
-    ) -> Result<Option<pb::IngestAck>, tonic::Status> {
-        pb::IngestAck::decode(src)
-            .map(Some)
-            .map_err(|e| tonic::Status::internal(e.to_string()))
-    }
-}
-
 /// The first ack of a stream carrying `body`.
 async fn first_ack(server: &uavnavd::RunningServer, body: Vec<u8>) -> pb::IngestAck {
     let channel = tonic::transport::Endpoint::from_shared(format!("http://{}", server.grpc_addr))

@@ -109,54 +109,6 @@ async fn each_bad_envelope_gets_its_status_and_reason() {
     server.shutdown().await.unwrap();
 }
 
-/// A codec that sends raw bytes, to put malformed protobuf on the wire.
-#[derive(Debug, Clone, Default)]
-struct RawCodec;
-#[derive(Debug)]
-struct RawEncoder;
-#[derive(Debug)]
-struct AckDecoder;
-
-impl tonic::codec::Codec for RawCodec {
-    type Encode = Vec<u8>;
-    type Decode = pb::IngestAck;
-    type Encoder = RawEncoder;
-    type Decoder = AckDecoder;
-    fn encoder(&mut self) -> RawEncoder {
-        RawEncoder
-    }
-    fn decoder(&mut self) -> AckDecoder {
-        AckDecoder
-    }
-}
-
-impl tonic::codec::Encoder for RawEncoder {
-    type Item = Vec<u8>;
-    type Error = tonic::Status;
-    fn encode(
-        &mut self,
-        item: Vec<u8>,
-        dst: &mut tonic::codec::EncodeBuf<'_>,
-    ) -> Result<(), tonic::Status> {
-        use bytes::BufMut;
-        dst.put_slice(&item);
-        Ok(())
-    }
-}
-
-impl tonic::codec::Decoder for AckDecoder {
-    type Item = pb::IngestAck;
-    type Error = tonic::Status;
-    fn decode(
-        &mut self,
-        src: &mut tonic::codec::DecodeBuf<'_>,
-    ) -> Result<Option<pb::IngestAck>, tonic::Status> {
-        pb::IngestAck::decode(src)
-            .map(Some)
-            .map_err(|e| tonic::Status::internal(e.to_string()))
-    }
-}
-
 async fn raw_call(
     server: &uavnavd::RunningServer,
     path: &'static str,

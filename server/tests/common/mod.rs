@@ -214,3 +214,52 @@ pub fn offline_poses(config: &VehicleConfig, events: &[SensorEvent]) -> Vec<pb::
     }
     poses
 }
+
+/// A codec that sends raw encoded bytes on the Ingest stream (malformed protobuf, hand-built
+/// oversize batches: the client allocates nothing per sample) and decodes the acks.
+#[derive(Debug, Clone, Default)]
+pub struct RawCodec;
+#[derive(Debug)]
+pub struct RawEncoder;
+#[derive(Debug)]
+pub struct AckDecoder;
+
+impl tonic::codec::Codec for RawCodec {
+    type Encode = Vec<u8>;
+    type Decode = pb::IngestAck;
+    type Encoder = RawEncoder;
+    type Decoder = AckDecoder;
+    fn encoder(&mut self) -> RawEncoder {
+        RawEncoder
+    }
+    fn decoder(&mut self) -> AckDecoder {
+        AckDecoder
+    }
+}
+
+impl tonic::codec::Encoder for RawEncoder {
+    type Item = Vec<u8>;
+    type Error = tonic::Status;
+    fn encode(
+        &mut self,
+        item: Vec<u8>,
+        dst: &mut tonic::codec::EncodeBuf<'_>,
+    ) -> Result<(), tonic::Status> {
+        use bytes::BufMut;
+        dst.put_slice(&item);
+        Ok(())
+    }
+}
+
+impl tonic::codec::Decoder for AckDecoder {
+    type Item = pb::IngestAck;
+    type Error = tonic::Status;
+    fn decode(
+        &mut self,
+        src: &mut tonic::codec::DecodeBuf<'_>,
+    ) -> Result<Option<pb::IngestAck>, tonic::Status> {
+        <pb::IngestAck as prost::Message>::decode(src)
+            .map(Some)
+            .map_err(|e| tonic::Status::internal(e.to_string()))
+    }
+}
