@@ -9,20 +9,18 @@ use std::time::Duration;
 use common::*;
 use uavnav_client::{Client, Selector, pb};
 
-/// Poses recorded on `/uavnav/{vehicle}/pose` in an MCAP file: (t_ns, lat, lon, alt).
+/// A pose as (t_ns, lat, lon, alt).
+fn lla(p: &pb::PoseEstimate) -> (i64, f64, f64, f64) {
+    let g = p.position.unwrap();
+    (p.t_ns, g.latitude_deg, g.longitude_deg, g.altitude_m)
+}
+
+/// The poses of `vehicle` in an MCAP recording, by time.
 fn recorded_poses(path: &Path, vehicle: &str) -> Vec<(i64, f64, f64, f64)> {
-    use prost::Message;
-    let bytes = std::fs::read(path).unwrap();
-    let topic = format!("/uavnav/{vehicle}/pose");
-    let mut out = Vec::new();
-    for m in mcap::MessageStream::new(&bytes).unwrap() {
-        let m = m.unwrap();
-        if m.channel.topic == topic {
-            let p = pb::PoseEstimate::decode(m.data.as_ref()).unwrap();
-            let g = p.position.unwrap();
-            out.push((p.t_ns, g.latitude_deg, g.longitude_deg, g.altitude_m));
-        }
-    }
+    let mut out: Vec<_> = uavnav_tests::recording::recorded_poses(path, vehicle)
+        .iter()
+        .map(lla)
+        .collect();
     out.sort_by_key(|p| p.0);
     out
 }
@@ -81,13 +79,7 @@ async fn record_then_replay_reproduces_the_poses() {
     .await;
     assert_eq!(out.status.code(), Some(0));
     let got = collect(&mut w, poses_a.len(), Duration::from_secs(20)).await;
-    let mut poses_b: Vec<(i64, f64, f64, f64)> = got
-        .iter()
-        .map(|p| {
-            let g = p.position.unwrap();
-            (p.t_ns, g.latitude_deg, g.longitude_deg, g.altitude_m)
-        })
-        .collect();
+    let mut poses_b: Vec<(i64, f64, f64, f64)> = got.iter().map(lla).collect();
     poses_b.sort_by_key(|p| p.0);
     assert_eq!(poses_b.len(), poses_a.len());
     for (x, y) in poses_a.iter().zip(&poses_b) {

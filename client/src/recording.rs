@@ -32,10 +32,9 @@ use std::io::BufReader;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use prost::Message;
-use uavnav_proto::topics::{self, Stream};
+use uavnav_proto::keys::Leaf;
+use uavnav_proto::topics;
 
-use crate::pb;
 use crate::pb::sensor_envelope::Payload;
 
 /// Messages held back to restore log-time order.
@@ -205,18 +204,22 @@ impl RecordingReader {
             return Ok(());
         }
         let data = msg.data.as_ref();
-        let payload = match stream {
-            Stream::Imu => pb::ImuBatch::decode(data).map(Payload::Imu),
-            Stream::Gnss => pb::GnssFix::decode(data).map(Payload::Gnss),
-            Stream::Mag => pb::MagSample::decode(data).map(Payload::Mag),
-            Stream::Baro => pb::BaroSample::decode(data).map(Payload::Baro),
-            Stream::Config => pb::VehicleConfig::decode(data).map(Payload::Config),
-            _ => Ok(Payload::Camera(
+        let payload = match stream.input() {
+            // Recorders store a camera frame as its plain image.
+            Some(Leaf::Camera) => Payload::Camera(
                 topics::decode_camera(data, msg.publish_time)
                     .map_err(|e| self.bad_message(msg, e.to_string()))?,
-            )),
-        }
-        .map_err(|e| self.bad_message(msg, format!("undecodable {}: {e}", stream.schema())))?;
+            ),
+            Some(leaf) => match leaf.decode_input(data) {
+                Some(Ok(p)) => p,
+                Some(Err(e)) => {
+                    let reason = format!("undecodable {}: {e}", stream.schema());
+                    return Err(self.bad_message(msg, reason));
+                }
+                None => return Ok(()),
+            },
+            None => return Ok(()),
+        };
         let vehicle_id = match self.ids.get(vehicle) {
             Some(id) => Arc::clone(id),
             None => {

@@ -14,9 +14,9 @@ use crate::keys::{self, Leaf};
 use crate::pb;
 use crate::watch::Selector;
 
-/// The Zenoh encoding of a uavnav.v1 message: protobuf with the full message name as schema.
+/// The Zenoh encoding of a uavnav.v1 message ([`keys::encoding_for`], the service's too).
 pub fn encoding(full_name: &str) -> Encoding {
-    Encoding::APPLICATION_PROTOBUF.with_schema(full_name)
+    Encoding::from(keys::encoding_for(full_name))
 }
 
 /// The session configuration for an endpoint's locators (none = default config with scouting).
@@ -259,4 +259,23 @@ where
             }
         },
     )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Zenoh reads the shared string as its well-known protobuf encoding with the message name as
+    /// schema (what a peer that checks the encoding id expects), not as a custom encoding.
+    #[test]
+    fn the_shared_encoding_is_zenohs_protobuf_with_schema() {
+        for leaf in Leaf::INPUTS.into_iter().chain(Leaf::OUTPUTS) {
+            let name = leaf.message_name();
+            assert_eq!(
+                encoding(name),
+                Encoding::APPLICATION_PROTOBUF.with_schema(name)
+            );
+            assert_eq!(encoding(name).to_string(), keys::encoding_for(name));
+        }
+    }
 }

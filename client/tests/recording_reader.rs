@@ -1,11 +1,11 @@
-//! The recording reader: files written by the dataset crate's MCAP writer (the layout of every
-//! uavnav recorder) and by the service's own recorder read back as the wire messages sent, in
+//! The recording reader: files written in the recorders' layout (the test kit's recording
+//! builder, through the writer every uavnav recorder uses) and by the service's own recorder read
+//! back as the wire messages sent, in
 //! log-time order, per vehicle; broken and disordered files are errors that say where.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod common;
 
-use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use common::*;
@@ -13,7 +13,7 @@ use uavnav_client::pb::sensor_envelope::Payload;
 use uavnav_client::recording::{self, RecordedMessage, RecordingError, RecordingReader};
 use uavnav_client::{Client, pb};
 use uavnav_dataset::mcap_io::Stream;
-use uavnav_dataset::{McapOptions, McapWriter};
+use uavnav_tests::recording::{RecordingBuilder, record_flight, recordings, write_recording};
 
 fn imu(t_ns: i64) -> pb::ImuBatch {
     pb::ImuBatch {
@@ -52,30 +52,6 @@ fn camera(t_ns: i64, camera_id: u32) -> pb::CameraFrame {
     frame
 }
 
-/// Writes one input as the recorders do (a camera frame as its plain image).
-fn put(w: &mut McapWriter, v: &str, p: &Payload, publish: i64, log: i64) {
-    match p {
-        Payload::Imu(m) => w.write_message(v, Stream::Imu, m, publish, log),
-        Payload::Gnss(m) => w.write_message(v, Stream::Gnss, m, publish, log),
-        Payload::Mag(m) => w.write_message(v, Stream::Mag, m, publish, log),
-        Payload::Baro(m) => w.write_message(v, Stream::Baro, m, publish, log),
-        Payload::Config(m) => w.write_message(v, Stream::Config, m, publish, log),
-        Payload::Camera(m) => {
-            w.write_message(v, Stream::Camera, m.image.as_ref().unwrap(), publish, log)
-        }
-    }
-    .unwrap();
-}
-
-/// Writes `(vehicle, payload, publish ns, log ns)` records.
-fn write(path: &Path, records: &[(&str, Payload, i64, i64)]) {
-    let mut w = McapWriter::create(path, &McapOptions::default()).unwrap();
-    for (v, p, publish, log) in records {
-        put(&mut w, v, p, *publish, *log);
-    }
-    w.finish().unwrap();
-}
-
 fn read_all(reader: RecordingReader) -> Vec<RecordedMessage> {
     reader.map(|m| m.unwrap()).collect()
 }
@@ -96,9 +72,10 @@ fn reads_every_input_in_log_time_order_and_skips_the_rest() {
         temperature_degc: None,
     };
     // Log times out of order by a few messages (two recorder threads), equal ones kept in file
-    // order; outputs and truth in between.
+    // order; outputs and truth in between. Publish times are the recorders': the sensor time, the
+    // arrival for a configuration.
     let records = [
-        ("a", Payload::Config(config), 5, 1_000),
+        ("a", Payload::Config(config), 1_000, 1_000),
         ("a", Payload::Imu(imu(10)), 10, 1_010),
         ("b", Payload::Imu(imu(10)), 10, 1_005),
         ("a", Payload::Gnss(gnss(20)), 20, 1_020),
@@ -106,25 +83,26 @@ fn reads_every_input_in_log_time_order_and_skips_the_rest() {
         ("a", Payload::Baro(baro), 40, 1_040),
         ("a", Payload::Camera(camera(50, 1)), 50, 1_030),
     ];
-    let mut w = McapWriter::create(&path, &McapOptions::default()).unwrap();
-    for (i, (v, p, publish, log)) in records.iter().enumerate() {
-        put(&mut w, v, p, *publish, *log);
+    let mut w = RecordingBuilder::create(&path);
+    for (i, (v, p, _, log)) in records.iter().enumerate() {
+        w.input(v, p, *log);
         if i == 2 {
             let pose = pb::PoseEstimate {
                 vehicle_id: "a".into(),
                 t_ns: 10,
                 ..Default::default()
             };
-            w.write_pose("a", &pose, 1_011, None).unwrap();
+            w.writer().write_pose("a", &pose, 1_011, None).unwrap();
             let truth = pb::TruthSample {
                 t_ns: 10,
                 ..Default::default()
             };
-            w.write_message("a", Stream::Truth, &truth, 10, 1_011)
+            w.writer()
+                .write_message("a", Stream::Truth, &truth, 10, 1_011)
                 .unwrap();
         }
     }
-    w.finish().unwrap();
+    w.finish();
 
     assert_eq!(recording::vehicles(&path).unwrap(), ["a", "b"]);
     let got = read_all(RecordingReader::open(&path).unwrap());
@@ -164,9 +142,9 @@ fn disorder_beyond_the_window_and_broken_files_are_errors() {
     let path = dir.path().join("late.mcap");
     let records: Vec<_> = [10, 20, 5]
         .into_iter()
-        .map(|log| ("v", Payload::Imu(imu(log)), log, log))
+        .map(|log| ("v", Payload::Imu(imu(log)), log))
         .collect();
-    write(&path, &records);
+    write_recording(&path, &records);
     // The default window restores the order; a window of one message cannot.
     assert_eq!(read_all(RecordingReader::open(&path).unwrap()).len(), 3);
     let mut r = RecordingReader::open(&path).unwrap().window(1);
@@ -200,14 +178,15 @@ fn disorder_beyond_the_window_and_broken_files_are_errors() {
 
     // A message whose bytes are not its schema: the messages before it, then the error naming it.
     let bad = dir.path().join("bad.mcap");
-    let mut w = McapWriter::create(&bad, &McapOptions::default()).unwrap();
-    w.write_message("v", Stream::Imu, &imu(1), 1, 1).unwrap();
+    let mut w = RecordingBuilder::create(&bad);
+    w.input("v", &Payload::Imu(imu(1)), 1);
     let not_a_fix = pb::ImuBatch {
         samples: vec![pb::ImuSample::default(); 3],
     };
-    w.write_message("v", Stream::Camera, &not_a_fix, 2, 2)
+    w.writer()
+        .write_message("v", Stream::Camera, &not_a_fix, 2, 2)
         .unwrap();
-    w.finish().unwrap();
+    w.finish();
     let got: Vec<_> = RecordingReader::open(&bad).unwrap().collect();
     assert_eq!(got.len(), 2, "{got:?}");
     assert_eq!(got[0].as_ref().unwrap().log_time_ns, 1);
@@ -215,24 +194,33 @@ fn disorder_beyond_the_window_and_broken_files_are_errors() {
     assert!(e.to_string().contains("/uavnav/v/camera"), "{e}");
 }
 
-/// The recordings in `dir`, sorted by name (= index).
-fn files(dir: &Path) -> Vec<PathBuf> {
-    let mut out: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
-        .collect();
-    out.sort();
-    out
+/// A simulated flight recorded as the recorders write it reads back as the messages sent, in
+/// order, with the recorders' times (publish = sensor time, the arrival for the configuration).
+#[test]
+fn reads_a_recorded_flight_back_as_sent() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("flight.mcap");
+    let sent = record_flight(&path, "sim-1", 2.0);
+    assert!(sent.len() > 100, "{} messages", sent.len());
+    let got = read_all(RecordingReader::open(&path).unwrap());
+    let payloads: Vec<Payload> = got.iter().map(|m| m.payload.clone()).collect();
+    assert!(payloads == sent, "the recording differs from what was sent");
+    assert!(got.iter().all(|m| &*m.vehicle_id == "sim-1"));
+    // The configuration leads, logged at the first sensor time; IMU batches are published at
+    // their last sample.
+    assert_eq!(got[0].publish_time_ns, got[0].log_time_ns);
+    assert_eq!(got[0].log_time_ns, got[1].log_time_ns);
+    for m in &got {
+        if let Payload::Imu(b) = &m.payload {
+            assert_eq!(m.publish_time_ns, b.samples.last().unwrap().t_ns as u64);
+        }
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn reads_back_what_the_service_recorded() {
     let dir = tempfile::tempdir().unwrap();
-    let mut c = uavnavd::Config::default();
-    c.grpc.addr = "127.0.0.1:0".parse().unwrap();
-    c.http.addr = "127.0.0.1:0".parse().unwrap();
-    c.zenoh.enabled = false;
+    let mut c = loopback_config();
     c.record.directory = Some(dir.path().to_owned());
     let server = uavnavd::Server::start(c).await.unwrap();
     let client = Client::connect_url(&format!("grpc://{}", server.grpc_addr))
@@ -245,7 +233,7 @@ async fn reads_back_what_the_service_recorded() {
     tokio::time::sleep(Duration::from_millis(200)).await;
     server.shutdown().await.unwrap();
 
-    let files = files(dir.path());
+    let files = recordings(dir.path());
     assert_eq!(files.len(), 1, "{files:?}");
     assert_eq!(recording::vehicles(&files[0]).unwrap(), ["rec-a", "rec-b"]);
     let got = read_all(RecordingReader::open(&files[0]).unwrap());

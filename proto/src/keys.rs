@@ -17,9 +17,13 @@
 //! | `uavnav/v1/vehicle/{id}/alive` | liveliness token | — |
 //!
 //! Payloads are the protobuf encoding of the message, with Zenoh encoding `application/protobuf`
-//! and the message's full name ([`Leaf::message_name`]) as schema.
+//! and the message's full name ([`Leaf::message_name`]) as schema: [`encoding_for`] gives that
+//! encoding as the string Zenoh parses (`Encoding::from`), so that the service and its clients
+//! label payloads alike without this crate depending on Zenoh.
 
 use crate::names;
+use crate::v1;
+use crate::v1::sensor_envelope::Payload;
 
 /// Prefix of every vehicle key.
 pub const VEHICLE_PREFIX: &str = "uavnav/v1/vehicle";
@@ -34,6 +38,16 @@ pub const ALL_VEHICLE_KEYS: &str = "uavnav/v1/vehicle/**";
 pub const EVERY_VEHICLE_LEAF: &str = "uavnav/v1/vehicle/*/*";
 /// The latest-pose queryables of every vehicle.
 pub const EVERY_POSE_LATEST: &str = "uavnav/v1/vehicle/*/pose/latest";
+
+/// The Zenoh encoding of every payload, before the schema: Zenoh's well-known protobuf encoding
+/// (a peer that checks the encoding id sees protobuf, not a custom string).
+pub const PROTOBUF_ENCODING: &str = "application/protobuf";
+
+/// The Zenoh encoding of a payload whose message has protobuf full name `full_name` (e.g.
+/// [`Leaf::message_name`]): `application/protobuf;{full_name}`, Zenoh's `encoding;schema` form.
+pub fn encoding_for(full_name: &str) -> String {
+    format!("{PROTOBUF_ENCODING};{full_name}")
+}
 
 /// Leaf of each input and output of a vehicle.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -96,6 +110,22 @@ impl Leaf {
             Leaf::Pose => names::POSE_ESTIMATE,
             Leaf::Health => names::VEHICLE_HEALTH,
         }
+    }
+
+    /// Decodes the protobuf bytes of an input leaf's message into a `SensorEnvelope` payload;
+    /// `None` for an output leaf. What the service's Zenoh input and `uavnav record` receive, and
+    /// the recording reader reads back (but for a recorded camera frame, stored as its image).
+    pub fn decode_input(self, bytes: &[u8]) -> Option<Result<Payload, prost::DecodeError>> {
+        use prost::Message;
+        Some(match self {
+            Leaf::Imu => v1::ImuBatch::decode(bytes).map(Payload::Imu),
+            Leaf::Gnss => v1::GnssFix::decode(bytes).map(Payload::Gnss),
+            Leaf::Mag => v1::MagSample::decode(bytes).map(Payload::Mag),
+            Leaf::Baro => v1::BaroSample::decode(bytes).map(Payload::Baro),
+            Leaf::Camera => v1::CameraFrame::decode(bytes).map(Payload::Camera),
+            Leaf::Config => v1::VehicleConfig::decode(bytes).map(Payload::Config),
+            Leaf::Pose | Leaf::Health => return None,
+        })
     }
 
     /// Whether a sender publishes it (an input of the service).
@@ -190,6 +220,49 @@ mod tests {
         );
         assert_eq!(Leaf::Camera.message_name(), "uavnav.v1.CameraFrame");
         assert_eq!(Leaf::Health.message_name(), "uavnav.v1.VehicleHealth");
+    }
+
+    /// The encodings deployed peers see: protobuf with the message's full name as schema.
+    #[test]
+    fn encodings_are_protobuf_with_the_message_name() {
+        assert_eq!(
+            encoding_for(Leaf::Imu.message_name()),
+            "application/protobuf;uavnav.v1.ImuBatch"
+        );
+        assert_eq!(
+            encoding_for(crate::names::LIST_VEHICLES_RESPONSE),
+            "application/protobuf;uavnav.v1.ListVehiclesResponse"
+        );
+        for leaf in ALL {
+            let e = encoding_for(leaf.message_name());
+            let (prefix, schema) = e.split_once(';').unwrap();
+            assert_eq!(prefix, PROTOBUF_ENCODING);
+            assert_eq!(schema, leaf.message_name());
+        }
+    }
+
+    #[test]
+    fn inputs_decode_as_their_payload_and_outputs_not_at_all() {
+        use prost::Message;
+        let fix = v1::GnssFix {
+            t_ns: 7,
+            latitude_deg: 45.0,
+            ..Default::default()
+        };
+        let got = Leaf::Gnss.decode_input(&fix.encode_to_vec()).unwrap();
+        assert_eq!(got.unwrap(), Payload::Gnss(fix));
+        let batch = v1::ImuBatch {
+            samples: vec![v1::ImuSample::default(); 2],
+        };
+        let got = Leaf::Imu.decode_input(&batch.encode_to_vec()).unwrap();
+        assert_eq!(got.unwrap(), Payload::Imu(batch));
+        assert!(Leaf::Config.decode_input(&[0xff, 0xff]).unwrap().is_err());
+        for leaf in Leaf::OUTPUTS {
+            assert!(leaf.decode_input(&[]).is_none(), "{leaf:?}");
+        }
+        for leaf in Leaf::INPUTS {
+            assert!(leaf.decode_input(&[]).is_some(), "{leaf:?}");
+        }
     }
 
     #[test]

@@ -13,6 +13,7 @@
 //! | [`foxglove_conv`] | GNSS fix → `foxglove.LocationFix`, pose → `foxglove.PoseInFrame`, timestamps, a recorded camera image → `CameraFrame` |
 //! | [`codec`] | the gRPC codec of the generated service: prost, with size limits checked on the wire before decoding |
 //! | [`wire`] | counting a repeated field's entries in encoded bytes without decoding them |
+//! | [`input`] | [`input::InputRef`], one sensor input borrowed (the service's ingest path, the recorders' MCAP layout) |
 //! | [`keys`] | the service's Zenoh key expressions (`uavnav/v1/vehicle/{id}/{leaf}`, ...), used by the service and the client |
 //! | [`topics`] | the MCAP recording topics (`/uavnav/{vehicle}/{stream}`), used by the dataset reader/writer, the recorders and the client's recording reader |
 //!
@@ -40,6 +41,7 @@ pub mod codec;
 pub mod compact;
 pub mod convert;
 pub mod foxglove_conv;
+pub mod input;
 pub mod keys;
 pub mod topics;
 pub mod wire;

@@ -25,7 +25,7 @@ use crate::health::HealthWindow;
 use crate::hub::{Hub, Pose, PoseBatch};
 use crate::metrics::Metrics;
 use crate::reorder::{Refused, ReorderBuffer};
-use crate::vehicle::{InputKind, VehicleShared, VehicleStats};
+use crate::vehicle::{InputKind, VehicleShared, VehicleStats, mono_now};
 use crate::vision_pool::VisionPool;
 
 /// Most inputs held in one reorder window whatever their timestamps (memory bound).
@@ -264,14 +264,14 @@ pub fn spawn(
     let span = info_span!("vehicle", id = %shared.id);
     let actor = Actor {
         buffer: ReorderBuffer::new(ctx.window_ns(), REORDER_CAPACITY),
-        window: HealthWindow::new(Instant::now()),
+        window: HealthWindow::new(mono_now()),
         shared: Arc::clone(&shared),
         engine,
         pending: None,
         outbox: Vec::new(),
         stamped: 0,
         ingest_times: VecDeque::new(),
-        last_input: Instant::now(),
+        last_input: mono_now(),
         ctx,
         span,
         divergence_resets: 0,
@@ -345,12 +345,12 @@ impl Actor {
                 },
                 _ = tick.tick() => {
                     self.publish_health();
-                    if self.last_input.elapsed() >= idle && self.pending.is_none() {
+                    if mono_now().saturating_duration_since(self.last_input) >= idle && self.pending.is_none() {
                         break true;
                     }
                 }
                 () = &mut flush, if !self.buffer.is_empty() => {
-                    let (due, now) = (self.last_input + flush_after, Instant::now());
+                    let (due, now) = (self.last_input + flush_after, mono_now());
                     if now >= due {
                         self.flush_all();
                     }
@@ -412,7 +412,7 @@ impl Actor {
     fn on_msg(&mut self, msg: Msg) {
         match msg {
             Msg::Data(batch) => {
-                self.last_input = Instant::now();
+                self.last_input = mono_now();
                 for s in batch {
                     self.on_input(s);
                 }
@@ -575,7 +575,7 @@ impl Actor {
         if self.stamped >= self.outbox.len() {
             return;
         }
-        let now = Instant::now();
+        let now = mono_now();
         for i in self.stamped..self.outbox.len() {
             if let Some((at, wall_ns)) = self.arrival_of(self.outbox[i].t_ns) {
                 self.outbox[i].ingest_wall_ns = wall_ns;
@@ -630,7 +630,7 @@ impl Actor {
         let report =
             Arc::new(
                 self.window
-                    .report(&self.shared, &engine, self.buffer.len(), Instant::now()),
+                    .report(&self.shared, &engine, self.buffer.len(), mono_now()),
             );
         self.shared
             .latest_health

@@ -126,20 +126,8 @@ pub async fn remap_transport_status<B>(
     resp
 }
 
-fn envelope_kind(e: &pb::SensorEnvelope) -> Option<Payload<'_>> {
-    use pb::sensor_envelope::Payload as P;
-    Some(match e.payload.as_ref()? {
-        P::Imu(b) => Payload::Imu(b),
-        P::Gnss(g) => Payload::Gnss(g),
-        P::Mag(m) => Payload::Mag(m),
-        P::Baro(b) => Payload::Baro(b),
-        P::Camera(c) => Payload::Camera(c),
-        P::Config(c) => Payload::Config(c),
-    })
-}
-
 async fn ack_envelope(ingestor: &Ingestor, e: pb::SensorEnvelope) -> pb::IngestAck {
-    let verdict = match envelope_kind(&e) {
+    let verdict = match e.payload.as_ref().map(Payload::from) {
         Some(p) => ingestor.submit(Transport::Grpc, &e.vehicle_id, p).await,
         None => {
             let metrics = &ingestor.registry().ctx().metrics;

@@ -11,35 +11,23 @@ use crate::actor::{Input, Msg, SendError, Stamped, VehicleHandle};
 use crate::metrics::{Kind, Outcome, Transport};
 use crate::registry::{Registry, RegistryError};
 use crate::validate::{self, ImageLimits, Rejection};
-use crate::vehicle::{Admitted, GateLimits, GateRefusal, InputKind, VehicleStats, wall_ns};
+use crate::vehicle::{
+    Admitted, GateLimits, GateRefusal, InputKind, VehicleStats, mono_now, wall_ns,
+};
 
-/// One decoded input message.
-#[derive(Debug, Clone, Copy)]
-pub enum Payload<'a> {
-    /// IMU batch.
-    Imu(&'a pb::ImuBatch),
-    /// GNSS fix.
-    Gnss(&'a pb::GnssFix),
-    /// Magnetometer sample.
-    Mag(&'a pb::MagSample),
-    /// Barometer sample.
-    Baro(&'a pb::BaroSample),
-    /// Camera frame.
-    Camera(&'a pb::CameraFrame),
-    /// Vehicle configuration.
-    Config(&'a pb::VehicleConfig),
-}
+/// One decoded input message: the wire contract's borrowed input, under the name the transports
+/// and the recorder know it by.
+pub use uavnav_proto::input::InputRef as Payload;
 
-impl Payload<'_> {
-    fn kind(&self) -> Kind {
-        match self {
-            Payload::Imu(_) => Kind::Imu,
-            Payload::Gnss(_) => Kind::Gnss,
-            Payload::Mag(_) => Kind::Mag,
-            Payload::Baro(_) => Kind::Baro,
-            Payload::Camera(_) => Kind::Camera,
-            Payload::Config(_) => Kind::Config,
-        }
+/// The metric kind of an input message.
+fn payload_kind(p: &Payload<'_>) -> Kind {
+    match p {
+        Payload::Imu(_) => Kind::Imu,
+        Payload::Gnss(_) => Kind::Gnss,
+        Payload::Mag(_) => Kind::Mag,
+        Payload::Baro(_) => Kind::Baro,
+        Payload::Camera(_) => Kind::Camera,
+        Payload::Config(_) => Kind::Config,
     }
 }
 
@@ -129,7 +117,7 @@ impl Ingestor {
 
     /// Validates and routes one message for vehicle `id`.
     pub async fn submit(&self, transport: Transport, id: &str, payload: Payload<'_>) -> Verdict {
-        let kind = payload.kind();
+        let kind = payload_kind(&payload);
         let verdict = match self.route(transport, id, payload).await {
             Ok(v) => v,
             Err(r) => {
@@ -214,7 +202,7 @@ impl Ingestor {
         let samples = validate::imu_batch(b)?;
         let h = self.vehicle(id)?;
         let ctx = self.registry.ctx();
-        let (at, wall) = (Instant::now(), wall_ns());
+        let (at, wall) = (mono_now(), wall_ns());
         let n = samples.len();
         let GateOutcome {
             batch,
@@ -284,7 +272,7 @@ impl Ingestor {
             Msg::Data(vec![Stamped {
                 input,
                 wall_ns: wall,
-                at: Instant::now(),
+                at: mono_now(),
             }]),
         )
         .await?;
@@ -330,7 +318,7 @@ impl Ingestor {
         let stamped = Stamped {
             input: Input::Camera(frame),
             wall_ns: wall,
-            at: Instant::now(),
+            at: mono_now(),
         };
         match h.send_camera(stamped, ctx).await {
             Ok(()) => {}

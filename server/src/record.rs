@@ -25,8 +25,8 @@ use prost::Message;
 use tokio::sync::{broadcast, oneshot};
 use tracing::{info, warn};
 use uavnav_core::{Lla, LocalFrame};
-use uavnav_dataset::mcap_io::Stream;
 use uavnav_dataset::{McapOptions, McapWriter};
+use uavnav_proto::input::InputRef;
 use uavnav_proto::v1 as pb;
 
 use crate::config::RecordConfig;
@@ -496,39 +496,14 @@ fn write(
     log_ns: i64,
     frame: Option<&LocalFrame>,
 ) -> uavnav_dataset::Result<u64> {
-    match body {
-        Body::Imu(m) => {
-            // As `uavnav record` does: publish time = the batch's last sample.
-            let t = m.samples.last().map_or(log_ns, |s| s.t_ns);
-            out.write_message(vehicle, Stream::Imu, m, t, log_ns)?;
-            Ok(m.encoded_len() as u64)
-        }
-        Body::Gnss(m) => {
-            out.write_message(vehicle, Stream::Gnss, m, m.t_ns, log_ns)?;
-            Ok(m.encoded_len() as u64)
-        }
-        Body::Mag(m) => {
-            out.write_message(vehicle, Stream::Mag, m, m.t_ns, log_ns)?;
-            Ok(m.encoded_len() as u64)
-        }
-        Body::Baro(m) => {
-            out.write_message(vehicle, Stream::Baro, m, m.t_ns, log_ns)?;
-            Ok(m.encoded_len() as u64)
-        }
-        Body::Camera(c) => {
-            // Stored as the plain image (the layout's camera channel); validation made sure
-            // there is one.
-            let Some(image) = &c.image else {
-                return Ok(0);
-            };
-            out.write_message(vehicle, Stream::Camera, image, c.t_ns, log_ns)?;
-            Ok(image.encoded_len() as u64)
-        }
-        Body::Config(m) => {
-            // A configuration has no sensor time: both times are the arrival (as `uavnav record`).
-            out.write_message(vehicle, Stream::Config, m, log_ns, log_ns)?;
-            Ok(m.encoded_len() as u64)
-        }
+    let input = match body {
+        Body::Imu(m) => InputRef::Imu(m),
+        Body::Gnss(m) => InputRef::Gnss(m),
+        Body::Mag(m) => InputRef::Mag(m),
+        Body::Baro(m) => InputRef::Baro(m),
+        // Validation made sure a recorded frame has its image.
+        Body::Camera(m) => InputRef::Camera(m),
+        Body::Config(m) => InputRef::Config(m),
         Body::Poses(b) => {
             let mut bytes = 0;
             for p in &b.poses {
@@ -536,7 +511,9 @@ fn write(
                 out.write_pose(vehicle, &wire, log_ns, frame)?;
                 bytes += wire.encoded_len() as u64;
             }
-            Ok(bytes)
+            return Ok(bytes);
         }
-    }
+    };
+    // The live layout of `uavnav record` too (the dataset crate's writer holds it once).
+    out.write_input(vehicle, input, log_ns)
 }

@@ -68,32 +68,10 @@ impl Server {
         config: Config,
         factory: SharedFactory,
     ) -> anyhow::Result<RunningServer> {
-        config.check()?;
-        let metrics = Metrics::new();
-        let (hub, stop_tx) = Hub::new();
-        let pool = VisionPool::new(config.vision.effective_workers(), config.vision.queue)
-            .context("starting the vision pool")?;
-        let ctx = Arc::new(Ctx {
-            vehicles: config.vehicles.clone(),
-            health_period: Duration::from_millis(config.health.period_ms),
-            metrics: metrics.clone(),
-            hub: hub.clone(),
-            pool: Arc::clone(&pool),
-            factory,
-            camera_bytes: crate::actor::CameraBytes {
-                queued: Default::default(),
-                limit: config.vision.queue_bytes,
-            },
-        });
-        let registry = Registry::new(ctx);
-        let limits = ImageLimits {
-            max_bytes: config.vision.max_image_bytes,
-            max_width_px: config.vision.max_camera_width_px,
-            max_height_px: config.vision.max_camera_height_px,
-            max_pixels: config.vision.max_camera_pixels,
-        };
-        let mut ingestor =
-            Ingestor::new(Arc::clone(&registry), limits, config.grpc.max_message_bytes);
+        let (mut ingestor, stop_tx) = ingest_path(&config, factory)?;
+        let registry = Arc::clone(ingestor.registry());
+        let (metrics, hub) = (registry.ctx().metrics.clone(), registry.ctx().hub.clone());
+        let pool = Arc::clone(&registry.ctx().pool);
         let recorder = match &config.record.directory {
             Some(dir) => {
                 let r = Recorder::start(dir, &config.record, &metrics, &hub)?;
@@ -155,6 +133,41 @@ impl Server {
             recorder,
         })
     }
+}
+
+/// The service without its transports, outputs and recorder: the vision pool, the context every
+/// vehicle actor shares, the empty registry and the ingest path over it, with the sender that
+/// starts shutdown. [`Server::start_with`] wires the transports to it; the test kit's paused-time
+/// harness (`uavnav_tests::paused`) drives it alone, under tokio's paused clock. Refuses an
+/// invalid configuration.
+pub fn ingest_path(
+    config: &Config,
+    factory: SharedFactory,
+) -> anyhow::Result<(Ingestor, watch::Sender<bool>)> {
+    config.check()?;
+    let (hub, stop_tx) = Hub::new();
+    let pool = VisionPool::new(config.vision.effective_workers(), config.vision.queue)
+        .context("starting the vision pool")?;
+    let ctx = Arc::new(Ctx {
+        vehicles: config.vehicles.clone(),
+        health_period: Duration::from_millis(config.health.period_ms),
+        metrics: Metrics::new(),
+        hub,
+        pool,
+        factory,
+        camera_bytes: crate::actor::CameraBytes {
+            queued: Default::default(),
+            limit: config.vision.queue_bytes,
+        },
+    });
+    let limits = ImageLimits {
+        max_bytes: config.vision.max_image_bytes,
+        max_width_px: config.vision.max_camera_width_px,
+        max_height_px: config.vision.max_camera_height_px,
+        max_pixels: config.vision.max_camera_pixels,
+    };
+    let ingestor = Ingestor::new(Registry::new(ctx), limits, config.grpc.max_message_bytes);
+    Ok((ingestor, stop_tx))
 }
 
 /// Shows every pose on the live view until shutdown (a lagging view skips poses, counted by the tap).

@@ -406,6 +406,14 @@ impl VehicleShared {
     }
 }
 
+/// The service's monotonic clock. Tokio's rather than `Instant::now()`: in the service they are
+/// the same clock, and a test that pauses tokio's time (`uavnav_tests::paused`) then moves idle
+/// eviction, the reorder flush, health periods and latencies with the runtime's timers, without
+/// real sleeps.
+pub fn mono_now() -> std::time::Instant {
+    tokio::time::Instant::now().into_std()
+}
+
 /// Nanoseconds since the UNIX epoch on the service's wall clock.
 pub fn wall_ns() -> i64 {
     std::time::SystemTime::now()

@@ -47,9 +47,9 @@ fn input_kind(leaf: Leaf) -> Option<Kind> {
 /// Decoder shards: inputs are spread over this many tasks by vehicle id (per-vehicle order kept).
 const SHARDS: usize = 4;
 
-/// The Zenoh encoding of a uavnav.v1 message.
+/// The Zenoh encoding of a uavnav.v1 message ([`keys::encoding_for`], the clients' too).
 pub fn encoding(full_name: &str) -> Encoding {
-    Encoding::APPLICATION_PROTOBUF.with_schema(full_name)
+    Encoding::from(keys::encoding_for(full_name))
 }
 
 /// Builds the session configuration from ours (the JSON5 file first, then our keys on top).
@@ -272,23 +272,14 @@ async fn decode_loop(
                 }
             }
         }
-        let verdict = match kind {
-            Kind::Imu => decode::<pb::ImuBatch>(&bytes)
-                .map(|m| (ingestor.clone(), id.to_owned(), In::Imu(m))),
-            Kind::Gnss => decode::<pb::GnssFix>(&bytes)
-                .map(|m| (ingestor.clone(), id.to_owned(), In::Gnss(m))),
-            Kind::Mag => decode::<pb::MagSample>(&bytes)
-                .map(|m| (ingestor.clone(), id.to_owned(), In::Mag(m))),
-            Kind::Baro => decode::<pb::BaroSample>(&bytes)
-                .map(|m| (ingestor.clone(), id.to_owned(), In::Baro(m))),
-            Kind::Camera => decode::<pb::CameraFrame>(&bytes)
-                .map(|m| (ingestor.clone(), id.to_owned(), In::Camera(m))),
-            _ => decode::<pb::VehicleConfig>(&bytes)
-                .map(|m| (ingestor.clone(), id.to_owned(), In::Config(m))),
+        // Outputs were skipped above: every leaf here is an input.
+        let Some(decoded) = leaf.decode_input(&bytes) else {
+            continue;
         };
+        let verdict = decoded.map(|m| (ingestor.clone(), id.to_owned(), m));
         match verdict {
             Ok((ing, id, msg)) => {
-                let v = ing.submit(Transport::Zenoh, &id, msg.payload()).await;
+                let v = ing.submit(Transport::Zenoh, &id, Payload::from(&msg)).await;
                 if v.status != pb::IngestStatus::Accepted {
                     debug!(vehicle = %id, status = ?v.status, reason = %v.reason, "zenoh input refused");
                 }
@@ -302,35 +293,6 @@ async fn decode_loop(
             ),
         }
     }
-}
-
-// One decoded message on its way to the ingestor: boxing the larger variants would allocate per
-// IMU message for nothing.
-#[allow(clippy::large_enum_variant)]
-enum In {
-    Imu(pb::ImuBatch),
-    Gnss(pb::GnssFix),
-    Mag(pb::MagSample),
-    Baro(pb::BaroSample),
-    Camera(pb::CameraFrame),
-    Config(pb::VehicleConfig),
-}
-
-impl In {
-    fn payload(&self) -> Payload<'_> {
-        match self {
-            In::Imu(m) => Payload::Imu(m),
-            In::Gnss(m) => Payload::Gnss(m),
-            In::Mag(m) => Payload::Mag(m),
-            In::Baro(m) => Payload::Baro(m),
-            In::Camera(m) => Payload::Camera(m),
-            In::Config(m) => Payload::Config(m),
-        }
-    }
-}
-
-fn decode<M: Message + Default>(bytes: &[u8]) -> Result<M, prost::DecodeError> {
-    M::decode(bytes)
 }
 
 /// Counts a refusal that never reached [`Ingestor::submit`] (undecodable or oversize).

@@ -76,16 +76,8 @@ async fn first_ack(server: &uavnavd::RunningServer, body: Vec<u8>) -> pb::Ingest
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_16_mib_batch_of_empty_samples_is_refused_before_it_is_decoded() {
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let endpoint = format!("tcp/127.0.0.1:{port}");
     let mut cfg = test_config();
-    cfg.zenoh.enabled = true;
-    cfg.zenoh.listen = vec![endpoint.clone()];
-    cfg.zenoh.instance = format!("amplification-{port}");
+    let endpoint = listen_zenoh(&mut cfg);
     let max = cfg.grpc.max_message_bytes;
     let server = start(cfg).await;
 

@@ -48,11 +48,11 @@ async fn each_bad_envelope_gets_its_status_and_reason() {
         camera_env("cam", 10, s + 5_000_000, vec![0xFF, 0xD8, 0x00, 0x13, 0x37]),
         camera_env("cam", 11, s + 6_000_000, jpeg_header(320, 240)),
         camera_env("cam", 12, s + 7_000_000, {
-            let mut big = jpeg_header(640, 480);
+            let mut big = camera_jpeg_header();
             big.resize(100 * 1024, 0);
             big
         }),
-        camera_env("nocam", 13, s, jpeg_header(640, 480)),
+        camera_env("nocam", 13, s, camera_jpeg_header()),
         imu_env("bad/id", 14, vec![imu(s)]),
         pb::SensorEnvelope {
             vehicle_id: "cam".into(),
@@ -61,7 +61,7 @@ async fn each_bad_envelope_gets_its_status_and_reason() {
         },
         imu_env("cam", 16, vec![imu(s + 100_000_000)]),
         imu_env("cam", 17, vec![imu(s + 1_000)]),
-        camera_env("cam", 18, s + 200_000_000, jpeg_header(640, 480)),
+        camera_env("cam", 18, s + 200_000_000, camera_jpeg_header()),
     ];
     let acks = ingest(&mut c, envs).await.unwrap();
     use pb::IngestStatus as S;
@@ -190,7 +190,7 @@ async fn oversize_message_is_resource_exhausted() {
     let mut cfg = test_config();
     cfg.grpc.max_message_bytes = 8 << 20;
     let server = start(cfg).await;
-    let mut env = camera_env("big", 1, 1_000, jpeg_header(640, 480));
+    let mut env = camera_env("big", 1, 1_000, camera_jpeg_header());
     if let Some(pb::sensor_envelope::Payload::Camera(c)) = env.payload.as_mut() {
         let mut d = c.image.as_ref().unwrap().data.to_vec();
         d.resize(9 << 20, 0);

@@ -105,16 +105,8 @@ async fn grpc_flight_equals_offline_estimate() {
 async fn zenoh_flight_equals_offline_estimate() {
     let (config, events) = common::sim_flight("mag-baro", 2.0);
     let want = common::offline_poses(&config, &events);
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let endpoint = format!("tcp/127.0.0.1:{port}");
     let mut cfg = test_config();
-    cfg.zenoh.enabled = true;
-    cfg.zenoh.listen = vec![endpoint.clone()];
-    cfg.zenoh.instance = format!("e2e-{port}");
+    let endpoint = common::listen_zenoh(&mut cfg);
     let server = Server::start(cfg).await.unwrap();
     let mut rx = server.registry().ctx().hub.poses.subscribe();
 

@@ -179,7 +179,7 @@ async fn health_is_published_at_a_fixed_rate() {
             vec![imu(1_000_001 + k as i64 * 5_000_000)],
         ));
     }
-    envs.push(camera_env("h", 100, 100_000_000, jpeg_header(640, 480)));
+    envs.push(camera_env("h", 100, 100_000_000, camera_jpeg_header()));
     ingest(&mut c, envs).await.unwrap();
     let mut reports = Vec::new();
     let start = tokio::time::Instant::now();

@@ -329,7 +329,7 @@ async fn a_corrupt_frame_body_is_counted_with_its_reason() {
         vec![
             config_env("v", 1, true),
             imu_env("v", 2, vec![imu(S), imu(S + DT)]),
-            camera_env("v", 3, S + 2 * DT, jpeg_header(640, 480)),
+            camera_env("v", 3, S + 2 * DT, camera_jpeg_header()),
             imu_env("v", 4, (3..60).map(|k| imu(S + k * DT)).collect()),
         ],
     )

@@ -126,7 +126,7 @@ async fn live_view_shows_pose_path_gnss_and_camera_of_each_vehicle() {
 
     let mut moved = fix(t0 + 1_000_000_000);
     moved.latitude_deg += 1e-4; // ~11 m north
-    let jpeg = jpeg_header(640, 480);
+    let jpeg = camera_jpeg_header();
     let acks = ingest(
         &mut grpc,
         vec![

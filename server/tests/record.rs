@@ -5,14 +5,14 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
 use common::test_config;
-use prost::Message;
 use uavnav_core::SensorEvent;
 use uavnav_dataset::mcap_io::reader::McapDataset;
 use uavnav_proto::v1 as pb;
+use uavnav_tests::recording::{self, recordings};
 use uavnavd::metrics::{RecordDrop, RecordDropLabels};
 use uavnavd::{Config, RunningServer, Server};
 
@@ -97,26 +97,11 @@ async fn stream_flight(
     got
 }
 
-/// The recordings in `dir`, sorted by name (= index).
-fn files(dir: &Path) -> Vec<PathBuf> {
-    let mut out: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
-        .collect();
-    out.sort();
-    out
-}
-
-/// The poses recorded on `/uavnav/{id}/pose`, in file order.
+/// The poses recorded for `id`, in file order, without what differs between runs.
 fn recorded_poses(path: &Path, id: &str) -> Vec<pb::PoseEstimate> {
-    let bytes = std::fs::read(path).unwrap();
-    let topic = format!("/uavnav/{id}/pose");
-    mcap::MessageStream::new(&bytes)
-        .unwrap()
-        .map(|m| m.unwrap())
-        .filter(|m| m.channel.topic == topic)
-        .map(|m| strip(pb::PoseEstimate::decode(m.data.as_ref()).unwrap()))
+    recording::recorded_poses(path, id)
+        .into_iter()
+        .map(strip)
         .collect()
 }
 
@@ -144,7 +129,7 @@ async fn recorded_flight_replays_to_the_recorded_poses() {
     assert!(metrics.record_bytes.get() > 0);
     assert_eq!(metrics.record_files.get(), 1);
 
-    let files = files(dir.path());
+    let files = recordings(dir.path());
     assert_eq!(files.len(), 1, "{files:?}");
     let ds = McapDataset::open(&files[0], Some("rec")).unwrap();
     assert!(ds.has_config());
@@ -187,7 +172,7 @@ async fn rotation_by_size_and_retention() {
 
     let closed = metrics.record_files.get();
     assert!(closed >= 5, "{closed} files closed");
-    let files = files(dir.path());
+    let files = recordings(dir.path());
     assert!(files.len() >= 2, "{files:?}");
     assert!((files.len() as u64) < closed, "nothing deleted: {files:?}");
     let names: Vec<_> = files

@@ -14,8 +14,6 @@ use uavnav_proto::keys::{self, Leaf};
 use uavnav_proto::v1 as pb;
 use zenoh::Wait;
 
-use uavnav_tests::net::free_port;
-
 async fn peer(connect: &str) -> zenoh::Session {
     let mut c = zenoh::Config::default();
     c.insert_json5("mode", "\"peer\"").unwrap();
@@ -33,12 +31,9 @@ fn enc(name: &str) -> zenoh::bytes::Encoding {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn zenoh_round_trip() {
-    let port = free_port();
-    let endpoint = format!("tcp/127.0.0.1:{port}");
     let mut cfg = test_config();
-    cfg.zenoh.enabled = true;
-    cfg.zenoh.listen = vec![endpoint.clone()];
-    cfg.zenoh.instance = format!("test-{port}");
+    let endpoint = listen_zenoh(&mut cfg);
+    let instance = cfg.zenoh.instance.clone();
     let server = start(cfg).await;
     let z = peer(&endpoint).await;
     let poses = z
@@ -53,7 +48,7 @@ async fn zenoh_round_trip() {
     tokio::time::sleep(Duration::from_millis(500)).await;
     let alive = z
         .liveliness()
-        .get(keys::service_key(&format!("test-{port}")))
+        .get(keys::service_key(&instance))
         .await
         .unwrap();
     assert!(

@@ -1,6 +1,8 @@
-//! Wire-message builders for service and client tests: plausible samples, envelopes, a vehicle
-//! configuration and a minimal JPEG header (what `server/tests` and the CLI tests used to write
-//! as literals each).
+//! Wire-message builders for service and client tests: plausible samples, envelopes, the tests'
+//! camera ([`camera_config`]), a vehicle configuration and a minimal JPEG header (what
+//! `server/tests` and the CLI tests used to write as literals each).
+
+use uavnav_core::{CameraConfig, CameraModel, Distortion};
 
 use crate::pb;
 
@@ -49,7 +51,31 @@ pub fn gnss_env(id: &str, seq: u64, f: pb::GnssFix) -> pb::SensorEnvelope {
     }
 }
 
-/// A vehicle configuration, with a 640x480 camera when `camera`.
+/// The tests' camera: 640x480 px, a 500 px focal length, centred principal point, no distortion,
+/// 10 Hz, mounted at the body origin with the body's axes. Its wire form is
+/// `pb::CameraConfig::from(&camera_config())`.
+pub fn camera_config() -> CameraConfig {
+    CameraConfig {
+        rate_hz: 10.0,
+        model: CameraModel {
+            width: CAMERA_WIDTH_PX.into(),
+            height: CAMERA_HEIGHT_PX.into(),
+            fx: 500.0,
+            fy: 500.0,
+            cx: 320.0,
+            cy: 240.0,
+            distortion: Distortion::None,
+        },
+        body_from_cam: nalgebra::Isometry3::identity(),
+    }
+}
+
+/// The width of [`camera_config`]'s images, px.
+pub const CAMERA_WIDTH_PX: u16 = 640;
+/// The height of [`camera_config`]'s images, px.
+pub const CAMERA_HEIGHT_PX: u16 = 480;
+
+/// A vehicle configuration, with [`camera_config`] when `camera`.
 pub fn vehicle_config(camera: bool) -> pb::VehicleConfig {
     pb::VehicleConfig {
         imu: Some(pb::ImuConfig {
@@ -64,25 +90,7 @@ pub fn vehicle_config(camera: bool) -> pb::VehicleConfig {
             lever_arm_body_m: Some(pb::Vector3::default()),
             ..Default::default()
         }),
-        camera: camera.then(|| pb::CameraConfig {
-            camera_id: 0,
-            rate_hz: 10.0,
-            width_px: 640,
-            height_px: 480,
-            fx_px: 500.0,
-            fy_px: 500.0,
-            cx_px: 320.0,
-            cy_px: 240.0,
-            distortion_model: pb::DistortionModel::None as i32,
-            body_from_cam: Some(pb::RigidTransform {
-                rotation: Some(pb::Quaternion {
-                    w: 1.0,
-                    ..Default::default()
-                }),
-                translation_m: Some(pb::Vector3::default()),
-            }),
-            ..Default::default()
-        }),
+        camera: camera.then(|| pb::CameraConfig::from(&camera_config())),
         terrain_elevation_m: 0.0,
         profile: pb::FilterProfile::Eskf as i32,
         mag: None,
@@ -147,6 +155,11 @@ pub fn jpeg_header(width: u16, height: u16) -> Vec<u8> {
     d
 }
 
+/// A JPEG header of [`camera_config`]'s image size (a frame the camera could have taken).
+pub fn camera_jpeg_header() -> Vec<u8> {
+    jpeg_header(CAMERA_WIDTH_PX, CAMERA_HEIGHT_PX)
+}
+
 /// A camera envelope carrying `data` as JPEG.
 pub fn camera_env(id: &str, seq: u64, t_ns: i64, data: Vec<u8>) -> pb::SensorEnvelope {
     pb::SensorEnvelope {
@@ -162,5 +175,30 @@ pub fn camera_env(id: &str, seq: u64, t_ns: i64, data: Vec<u8>) -> pb::SensorEnv
                 format: "jpeg".into(),
             }),
         })),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The wire camera is the literal the service tests were written against (a change here
+    /// changes what every camera test configures).
+    #[test]
+    fn the_wire_camera_is_640x480_at_500_px() {
+        let c = vehicle_config(true).camera.unwrap();
+        assert_eq!((c.camera_id, c.width_px, c.height_px), (0, 640, 480));
+        assert_eq!(
+            (c.fx_px, c.fy_px, c.cx_px, c.cy_px),
+            (500.0, 500.0, 320.0, 240.0)
+        );
+        assert_eq!(c.distortion_model, pb::DistortionModel::None as i32);
+        assert_eq!(c.rate_hz, 10.0);
+        let mount = c.body_from_cam.as_ref().unwrap();
+        assert_eq!(mount.rotation.as_ref().unwrap().w, 1.0);
+        assert_eq!(mount.translation_m.as_ref(), Some(&pb::Vector3::default()));
+        let back = CameraConfig::try_from(&c).unwrap();
+        assert_eq!(back, camera_config());
+        assert!(vehicle_config(false).camera.is_none());
     }
 }

@@ -1,6 +1,6 @@
 //! Shared by the client library's end-to-end tests: an in-process `uavnavd` (gRPC and HTTP on
 //! port 0, Zenoh listening on an explicit localhost port with multicast scouting off) and
-//! simulated flights as wire messages.
+//! simulated flights as wire messages, from the test kit; feeding and watching through the client.
 #![allow(dead_code)] // each test file uses a different part
 
 use std::time::Duration;
@@ -9,43 +9,11 @@ use uavnav_client::pb::sensor_envelope::Payload;
 use uavnav_client::{Client, pb};
 
 #[allow(unused_imports)] // each test file uses a different part
+pub use uavnav_tests::flight::wire_flight as flight;
+#[allow(unused_imports)]
 pub use uavnav_tests::net::free_port;
 #[allow(unused_imports)]
-pub use uavnav_tests::service::{Svc, smoke_text, start};
-
-/// A short smoke flight without camera: its wire configuration and its messages (the
-/// configuration first, then the sensors in time order, IMU samples four to a batch).
-pub fn flight(duration_s: f64) -> (pb::VehicleConfig, Vec<Payload>) {
-    let mut s = uavnav_sim::Scenario::from_toml_str(&smoke_text()).unwrap();
-    s.duration_s = duration_s;
-    s.camera.enabled = false;
-    let f = uavnav_sim::Flight::new(&s).unwrap();
-    let config = pb::VehicleConfig::from(&f.vehicle_config());
-    let mut msgs = vec![Payload::Config(config)];
-    let mut imu = Vec::new();
-    for ev in f.events() {
-        match ev.unwrap() {
-            uavnav_core::SensorEvent::Imu(s) => {
-                imu.push(s);
-                if imu.len() == 4 {
-                    msgs.push(Payload::Imu(pb::ImuBatch::from(imu.as_slice())));
-                    imu.clear();
-                }
-            }
-            other => {
-                if !imu.is_empty() {
-                    msgs.push(Payload::Imu(pb::ImuBatch::from(imu.as_slice())));
-                    imu.clear();
-                }
-                msgs.push(Payload::from(&other));
-            }
-        }
-    }
-    if !imu.is_empty() {
-        msgs.push(Payload::Imu(pb::ImuBatch::from(imu.as_slice())));
-    }
-    (config, msgs)
-}
+pub use uavnav_tests::service::{Svc, loopback_config, smoke_text, start};
 
 /// Feeds messages for `id` as fast as the service accepts.
 pub async fn feed(client: &Client, id: &str, msgs: &[Payload]) {

@@ -8,7 +8,8 @@
 //! ## Times
 //!
 //! *Publish time* is the sensor time of validity (`t_ns`, the vehicle's sensor clock). *Log time*
-//! is when the recorder received or wrote the message: a live recorder passes its wall clock. For
+//! is when the recorder received or wrote the message: a live recorder passes its wall clock (its
+//! inputs go through [`writer::McapWriter::write_input`], the one statement of that layout). For
 //! converted or simulated data there is no receive time, so the converters set log time = publish
 //! time = `t_ns` (the Foxglove timeline then shows sensor time); configuration and info messages get
 //! the time of the first sensor event. MCAP times are unsigned: negative `t_ns` cannot be recorded.

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use prost::Message;
 use uavnav_core::{Lla, LocalFrame, SensorEvent, TruthSample, VehicleConfig};
+use uavnav_proto::input::InputRef;
 use uavnav_proto::{foxglove_conv, v1};
 
 use super::{REFERENCE_METADATA_KEY, Stream, schema_data, topic};
@@ -221,6 +222,52 @@ impl McapWriter {
                 self.write_message(vehicle, Stream::Camera, &image, t, log_time_ns)
             }
         }
+    }
+
+    /// Writes one input as a live recorder received it, at `log_time_ns` (its wall clock), and
+    /// returns the bytes of the message written. The one place of the live layout, shared by the
+    /// service's recorder and `uavnav record` so that their files read alike: publish time is the
+    /// sensor time (an IMU batch's last sample; the arrival for an empty batch and for a
+    /// configuration, which has no sensor time); a camera frame is stored as its plain image (the
+    /// layout's camera channel), and one without an image is not written (0 bytes).
+    pub fn write_input(
+        &mut self,
+        vehicle: &str,
+        input: InputRef<'_>,
+        log_time_ns: i64,
+    ) -> Result<u64> {
+        let log = log_time_ns;
+        let bytes = match input {
+            InputRef::Imu(m) => {
+                let t = m.samples.last().map_or(log, |s| s.t_ns);
+                self.write_message(vehicle, Stream::Imu, m, t, log)?;
+                m.encoded_len()
+            }
+            InputRef::Gnss(m) => {
+                self.write_message(vehicle, Stream::Gnss, m, m.t_ns, log)?;
+                m.encoded_len()
+            }
+            InputRef::Mag(m) => {
+                self.write_message(vehicle, Stream::Mag, m, m.t_ns, log)?;
+                m.encoded_len()
+            }
+            InputRef::Baro(m) => {
+                self.write_message(vehicle, Stream::Baro, m, m.t_ns, log)?;
+                m.encoded_len()
+            }
+            InputRef::Camera(c) => {
+                let Some(image) = &c.image else {
+                    return Ok(0);
+                };
+                self.write_message(vehicle, Stream::Camera, image, c.t_ns, log)?;
+                image.encoded_len()
+            }
+            InputRef::Config(m) => {
+                self.write_message(vehicle, Stream::Config, m, log, log)?;
+                m.encoded_len()
+            }
+        };
+        Ok(bytes as u64)
     }
 
     /// Writes the vehicle configuration (publish time = log time = `t_ns`).

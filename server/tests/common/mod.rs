@@ -144,13 +144,9 @@ impl EngineFactory for SeeingFactory {
     }
 }
 
-/// A config for tests: loopback, port 0, no Zenoh, fast health.
+/// A config for tests: loopback, port 0, no Zenoh (the kit's), fast health.
 pub fn test_config() -> Config {
-    let mut c = Config::default();
-    c.grpc.addr = "127.0.0.1:0".parse().unwrap();
-    c.http.addr = "127.0.0.1:0".parse().unwrap();
-    c.zenoh.enabled = false;
-    c.zenoh.multicast_scouting = false;
+    let mut c = uavnav_tests::service::loopback_config();
     c.health.period_ms = 100;
     c.vision.workers = 1;
     c
@@ -176,6 +172,8 @@ pub async fn client(server: &RunningServer) -> UavNavClient<tonic::transport::Ch
 pub use uavnav_tests::flight::sim_flight;
 #[allow(unused_imports)]
 pub use uavnav_tests::net::eventually;
+#[allow(unused_imports)]
+pub use uavnav_tests::service::listen_zenoh;
 #[allow(unused_imports)]
 pub use uavnav_tests::wire::*;
 

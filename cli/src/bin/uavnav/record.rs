@@ -13,7 +13,6 @@ use std::collections::BTreeMap;
 use uavnav_client::keys::Leaf;
 use uavnav_client::{Selector, pb, unix_now_ns};
 use uavnav_core::LocalFrame;
-use uavnav_dataset::mcap_io::Stream;
 use uavnav_dataset::{McapOptions, McapWriter};
 
 use crate::common::{CliError, CliResult};
@@ -89,9 +88,10 @@ impl McapSink {
             .map_err(CliError::runtime)
     }
 
-    /// Records one raw message of `vehicle_id` on `leaf` (protobuf bytes as received); publish
-    /// time = the message's sensor time, log time = `log_time_ns`. Undecodable messages are skipped
-    /// (the service refuses them too) and counted by the caller.
+    /// Records one raw message of `vehicle_id` on `leaf` (protobuf bytes as received) at
+    /// `log_time_ns`, inputs in the service recorder's layout ([`McapWriter::write_input`]).
+    /// Undecodable messages, and camera frames without an image, are skipped (the service refuses
+    /// them too) and counted by the caller.
     pub fn raw(
         &mut self,
         vehicle_id: &str,
@@ -100,49 +100,35 @@ impl McapSink {
         log_time_ns: i64,
     ) -> Result<bool, CliError> {
         use prost::Message;
-        let w = &mut self.writer;
-        let r = match leaf {
-            Leaf::Imu => match pb::ImuBatch::decode(bytes) {
-                Ok(m) => {
-                    let t = m.samples.last().map_or(log_time_ns, |s| s.t_ns);
-                    w.write_message(vehicle_id, Stream::Imu, &m, t, log_time_ns)
-                }
-                Err(_) => return Ok(false),
-            },
-            Leaf::Gnss => match pb::GnssFix::decode(bytes) {
-                Ok(m) => w.write_message(vehicle_id, Stream::Gnss, &m, m.t_ns, log_time_ns),
-                Err(_) => return Ok(false),
-            },
-            Leaf::Mag => match pb::MagSample::decode(bytes) {
-                Ok(m) => w.write_message(vehicle_id, Stream::Mag, &m, m.t_ns, log_time_ns),
-                Err(_) => return Ok(false),
-            },
-            Leaf::Baro => match pb::BaroSample::decode(bytes) {
-                Ok(m) => w.write_message(vehicle_id, Stream::Baro, &m, m.t_ns, log_time_ns),
-                Err(_) => return Ok(false),
-            },
-            Leaf::Camera => match pb::CameraFrame::decode(bytes) {
-                Ok(pb::CameraFrame {
-                    t_ns,
-                    image: Some(image),
-                    ..
-                }) => w.write_message(vehicle_id, Stream::Camera, &image, t_ns, log_time_ns),
-                _ => return Ok(false),
-            },
-            Leaf::Config => match pb::VehicleConfig::decode(bytes) {
-                Ok(m) => w.write_message(vehicle_id, Stream::Config, &m, log_time_ns, log_time_ns),
-                Err(_) => return Ok(false),
-            },
-            Leaf::Pose => match pb::PoseEstimate::decode(bytes) {
-                Ok(m) => return self.pose(&m).map(|()| true),
-                Err(_) => return Ok(false),
-            },
-            Leaf::Health => match pb::VehicleHealth::decode(bytes) {
-                Ok(m) => w.write_message(vehicle_id, Stream::Health, &m, m.t_ns, log_time_ns),
-                Err(_) => return Ok(false),
-            },
+        match leaf {
+            Leaf::Pose => {
+                return match pb::PoseEstimate::decode(bytes) {
+                    Ok(m) => self.pose(&m).map(|()| true),
+                    Err(_) => Ok(false),
+                };
+            }
+            Leaf::Health => {
+                return match pb::VehicleHealth::decode(bytes) {
+                    Ok(m) => self
+                        .writer
+                        .write_health(vehicle_id, &m, log_time_ns)
+                        .map(|()| true)
+                        .map_err(|e| self.err(e)),
+                    Err(_) => Ok(false),
+                };
+            }
+            _ => {}
+        }
+        let Some(Ok(input)) = leaf.decode_input(bytes) else {
+            return Ok(false);
         };
-        r.map(|()| true).map_err(|e| self.err(e))
+        if matches!(&input, pb::sensor_envelope::Payload::Camera(f) if f.image.is_none()) {
+            return Ok(false);
+        }
+        self.writer
+            .write_input(vehicle_id, (&input).into(), log_time_ns)
+            .map(|_| true)
+            .map_err(|e| self.err(e))
     }
 
     /// Finishes the file (summary and index).
