@@ -111,11 +111,12 @@ fn copter_218_without_magnetometer() {
         return;
     };
     assert_eq!(s.bad_sigma_rows, 0, "{s}");
-    // Roll, pitch and horizontal targets met (1.37/1.01°, 0.55 m). Not yet: yaw within 10° and
-    // ≥ 95 % within 3σ (11.0°, 55 %): the GNSS-velocity heading sits 5–10° from the autopilot's
-    // compass heading with a stated σ of ~3°.
+    // Met: roll/pitch (1.35/1.01°), horizontal (0.54 m), never confidently wrong (100 % within
+    // 3σ; 55 % before the yaw σ was floored at the yaw bank's spread). Not yet: yaw within 10°
+    // (11.2° RMSE against the autopilot's compass heading, which has its own ~4° error).
     assert!(s.rmse_deg[0] <= 1.5 && s.rmse_deg[1] <= 1.5, "{s}");
     assert!(s.horizontal_rmse_m <= 1.5, "{s}");
+    assert!(s.yaw_within_3sigma >= 0.95, "{s}");
     assert!(s.rmse_deg[2] <= 15.0, "{s}");
 }
 
