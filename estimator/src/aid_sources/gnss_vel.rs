@@ -7,6 +7,7 @@
 use nalgebra::{Matrix3, SMatrix, Vector3};
 use uavnav_core::rotation::skew;
 
+use super::gnss_consistency::{ConsistencyParams, VelConsistency};
 use super::gnss_pos::GnssMeas;
 use super::{InnovDiag, UpdateOutcome, gated_update};
 use crate::state::{Cov, ErrVec, IBG, ITH, IV, N, Nominal};
@@ -42,6 +43,8 @@ pub struct GnssVelSource {
     pub diag: InnovDiag,
     /// Resets performed.
     pub resets: u32,
+    /// The receiver's velocities against its own positions (eq. V1): what they are fused with.
+    pub consistency: VelConsistency,
 }
 
 impl Default for GnssVelSource {
@@ -49,12 +52,18 @@ impl Default for GnssVelSource {
         Self {
             diag: InnovDiag::new(),
             resets: 0,
+            consistency: VelConsistency::default(),
         }
     }
 }
 
 impl GnssVelSource {
-    /// Fuses one fix's velocity; returns the correction to inject, if any.
+    /// Takes every fix (fused or not) into the consistency monitor, in time order.
+    pub fn observe(&mut self, meas: &GnssMeas, params: &ConsistencyParams) {
+        self.consistency.push(meas, params);
+    }
+
+    /// Fuses one fix's velocity, with the variance of [`VelConsistency::velocity_var`]; returns the correction to inject, if any.
     #[allow(clippy::too_many_arguments)]
     pub fn fuse(
         &mut self,
@@ -69,7 +78,8 @@ impl GnssVelSource {
     ) -> Option<ErrVec> {
         let v_meas = meas.vel_ned_mps?;
         let (y, h) = model(x, lever_b, gyro_b, w_ie, &v_meas);
-        let r = Matrix3::identity() * meas.sigma_vel_mps.powi(2).max(1e-6);
+        let var = self.consistency.velocity_var(meas.sigma_vel_mps);
+        let r = Matrix3::from_diagonal(&var.map(|v| v.max(1e-6)));
         let stuck = self.diag.consecutive_rejects > 0
             && meas.t_ns - self.diag.first_reject_t_ns >= reset_timeout_ns;
         if stuck {

@@ -4,12 +4,14 @@
 //! | module | measurement |
 //! |---|---|
 //! | [`baro_height`] | barometric height (ISA, eq. B1) with a drifting offset; holds the height without GNSS |
+//! | [`gnss_consistency`] | not a measurement: the receiver's velocities against its positions (eq. V1), which sets how far its velocities are trusted |
 //! | [`gnss_pos`] | antenna position through the lever arm (paper eq. 32) + Gauss–Markov error |
 //! | [`gnss_vel`] | antenna velocity with the `C(ω×r)` term (paper eq. 33) |
 //! | [`mag_heading`] | magnetometer heading against the WMM2025 declination (eq. M1) |
 //! | [`vision`] | relative rotation and direction of travel / metric translation between frames |
 
 pub mod baro_height;
+pub mod gnss_consistency;
 pub mod gnss_pos;
 pub mod gnss_vel;
 pub mod mag_heading;

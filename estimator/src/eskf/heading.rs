@@ -66,6 +66,16 @@ impl Eskf {
             }
             return;
         }
+        // The bank sees the heading only through the velocity, as the main filter does when the
+        // antenna sits on the IMU and no camera is fitted; a lever arm or a camera tells the main
+        // filter more than the bank knows.
+        let velocity_only = self.lever_b.norm() < 0.05 && self.body_from_cam.is_none();
+        if !mag_active
+            && velocity_only
+            && let Some((_, sigma)) = gsf
+        {
+            self.floor_yaw_sigma(sigma);
+        }
         // Emergency reset: GNSS velocity rejected for a while and the yaw estimator confidently
         // elsewhere (a heading aligned on a wrong hypothesis, or lost in a manoeuvre).
         let rejected_for = if self.gnss_vel.diag.consecutive_rejects > 0 {
@@ -92,6 +102,22 @@ impl Eskf {
                 self.yaw_resets += 1;
                 self.corrected = true;
             }
+        }
+    }
+
+    /// Without a magnetometer the heading is seen only through the GNSS velocity while the vehicle
+    /// accelerates; the main filter's yaw σ then shrinks on what its linear model believes, and in
+    /// long hovers it grows by the gyro noise alone, while a real heading also wanders with the
+    /// gyro's scale error over every yaw-in-place turn (copter_218 without its compass: σ 3–4.5°
+    /// while 10–16° from the autopilot's compass heading after 824° of turning). The yaw bank sees
+    /// the same data through a bank of nonlinear models, and its spread widens when they stop
+    /// telling the hypotheses apart: the main filter does not claim to know the heading better.
+    /// Only the yaw variance is raised, so the covariance stays positive semi-definite.
+    fn floor_yaw_sigma(&mut self, sigma_rad: f64) {
+        let i = ITH + 2;
+        let floor = sigma_rad * sigma_rad;
+        if self.p[(i, i)] < floor {
+            self.p[(i, i)] = floor;
         }
     }
 

@@ -20,7 +20,7 @@ use uavnav_core::magnetic::MagneticField;
 use uavnav_core::{Egomotion, ImuSample, Lla, LocalFrame, VehicleConfig};
 
 use crate::aid_sources::baro_height::{BaroHeightSource, BaroParams};
-use crate::aid_sources::gnss_pos::{GnssMeas, GnssPosSource, white_noise};
+use crate::aid_sources::gnss_pos::{GnssMeas, GnssPosSource, correlated_sigma, white_noise};
 use crate::aid_sources::gnss_vel::GnssVelSource;
 use crate::aid_sources::mag_heading::MagHeadingSource;
 use crate::aid_sources::vision::{VisionSource, VisionUse};
@@ -222,13 +222,6 @@ impl Eskf {
             return;
         }
         let meas = GnssMeas::from_fix(fix, frame.lla_to_ned(&lla));
-        if self.gnss_pos.diag.fused == 0 && self.x.is_none() {
-            // The Gauss–Markov strength follows the receiver's reported accuracy at start.
-            let f = self.params.gnss_pos_correlated_fraction;
-            let tau = self.params.gnss_pos_tau_s;
-            let (h2, v2) = (f * fix.sigma_h_m.powi(2), f * fix.sigma_v_m.powi(2));
-            self.noise.gm_psd = [2.0 * h2 / tau, 2.0 * h2 / tau, 2.0 * v2 / tau];
-        }
         if !self.buffer.push(Event::Gnss(meas)) {
             self.late_dropped += 1;
         }
@@ -450,12 +443,8 @@ impl Eskf {
             return;
         };
         let g = frame.gravity_ned(&m.pos_ned_m);
-        let f = self.params.gnss_pos_correlated_fraction.max(0.0);
-        let gm_sigma = [
-            f.sqrt() * m.sigma_h_m,
-            f.sqrt() * m.sigma_h_m,
-            f.sqrt() * m.sigma_v_m,
-        ];
+        let s = correlated_sigma(m, self.params.gnss_pos_correlated_fraction);
+        let gm_sigma = [s.x, s.y, s.z];
         let params = EstimatorParams {
             course_heading: self.course_heading,
             ..self.params.clone()
@@ -472,6 +461,8 @@ impl Eskf {
             };
             self.acc = CovAccum::default();
             self.corrected = true;
+            self.gnss_pos.gm_sigma_m = Some(s);
+            self.noise.gm_psd = gm_sigma.map(|s| 2.0 * s * s / self.params.gnss_pos_tau_s);
         }
     }
 
@@ -500,7 +491,17 @@ impl Eskf {
     fn fuse_gnss(&mut self, m: &GnssMeas, imu: &ImuSample) {
         self.feed_yaw_estimator(m);
         self.manage_heading(m);
-        let Some(x) = self.x else { return };
+        self.gnss_vel.observe(m, &self.params.gnss_vel_consistency);
+        let Some(mut x) = self.x else { return };
+        // The Gauss–Markov error state follows the receiver's reported accuracy, fix by fix.
+        self.noise.gm_psd = self.gnss_pos.follow_accuracy(
+            &mut x,
+            &mut self.p,
+            m,
+            self.params.gnss_pos_correlated_fraction,
+            self.params.gnss_pos_tau_s,
+        );
+        self.x = Some(x);
         let r = white_noise(
             m,
             self.params.gnss_pos_correlated_fraction,
