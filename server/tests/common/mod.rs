@@ -213,8 +213,8 @@ pub fn offline_poses(config: &VehicleConfig, events: &[SensorEvent]) -> Vec<pb::
     poses
 }
 
-/// A codec that sends raw encoded bytes on the Ingest stream (malformed protobuf, hand-built
-/// oversize batches: the client allocates nothing per sample) and decodes the acks.
+/// A codec that sends raw encoded bytes (malformed protobuf, hand-built oversize batches: the
+/// client allocates nothing per sample) and decodes the replies as Ingest acks.
 #[derive(Debug, Clone, Default)]
 pub struct RawCodec;
 #[derive(Debug)]
