@@ -90,6 +90,13 @@ pub fn correlated_sigma(meas: &GnssMeas, correlated_fraction: f64) -> Vector3<f6
     Vector3::new(f * meas.sigma_h_m, f * meas.sigma_h_m, f * meas.sigma_v_m)
 }
 
+/// The process-noise PSD per axis that keeps a first-order Gauss–Markov state of correlation
+/// time `tau_s` at the 1-σ `sigma_m` (`q = 2 σ² / τ`), m²/s.
+pub fn gm_psd(sigma_m: &Vector3<f64>, tau_s: f64) -> [f64; 3] {
+    let q = |s: f64| 2.0 * s * s / tau_s.max(1e-3);
+    [q(sigma_m.x), q(sigma_m.y), q(sigma_m.z)]
+}
+
 /// The white part of the measurement noise given the reported σ and the correlated fraction.
 pub fn white_noise(meas: &GnssMeas, correlated_fraction: f64, floor_m: f64) -> Matrix3<f64> {
     let wf = (1.0 - correlated_fraction).max(0.0);
@@ -133,8 +140,7 @@ impl GnssPosSource {
             }
         }
         self.gm_sigma_m = Some(s1);
-        let q = |s: f64| 2.0 * s * s / tau_s.max(1e-3);
-        [q(s1.x), q(s1.y), q(s1.z)]
+        gm_psd(&s1, tau_s)
     }
 
     /// Fuses one fix; returns the correction to inject, if any.

@@ -20,7 +20,9 @@ use uavnav_core::magnetic::MagneticField;
 use uavnav_core::{Egomotion, ImuSample, Lla, LocalFrame, VehicleConfig};
 
 use crate::aid_sources::baro_height::{BaroHeightSource, BaroParams};
-use crate::aid_sources::gnss_pos::{GnssMeas, GnssPosSource, correlated_sigma, white_noise};
+use crate::aid_sources::gnss_pos::{
+    GnssMeas, GnssPosSource, correlated_sigma, gm_psd, white_noise,
+};
 use crate::aid_sources::gnss_vel::GnssVelSource;
 use crate::aid_sources::mag_heading::MagHeadingSource;
 use crate::aid_sources::vision::{VisionSource, VisionUse};
@@ -462,7 +464,7 @@ impl Eskf {
             self.acc = CovAccum::default();
             self.corrected = true;
             self.gnss_pos.gm_sigma_m = Some(s);
-            self.noise.gm_psd = gm_sigma.map(|s| 2.0 * s * s / self.params.gnss_pos_tau_s);
+            self.noise.gm_psd = gm_psd(&s, self.params.gnss_pos_tau_s);
         }
     }
 
