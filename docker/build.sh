@@ -15,7 +15,7 @@
 #
 # The target dir is $CARGO_TARGET_DIR when set, else ./target. Both paths give an image with the same
 # layout: /usr/local/bin/{uavnavd,uavnav}, /etc/uavnav/uavnavd.toml, /usr/share/uavnav/scenarios/,
-# user uavnav (10001:10001), writable /data and /recordings, and the same HEALTHCHECK.
+# user uavnav (10001:10001), writable /data, /recordings and /certs, and the same HEALTHCHECK.
 set -euo pipefail
 
 here=$(cd "$(dirname "$0")" && pwd)
@@ -77,7 +77,7 @@ done
 stage=$(mktemp -d "${TMPDIR:-/tmp}/uavnav-image.XXXXXX")
 trap 'rm -rf "$stage"' EXIT
 rootfs=$stage/rootfs
-mkdir -p "$rootfs"/{usr/local/bin,etc/uavnav,usr/share/uavnav/scenarios,tmp} "$stage"/owned/{data,recordings}
+mkdir -p "$rootfs"/{usr/local/bin,etc/uavnav,usr/share/uavnav/scenarios,tmp} "$stage"/owned/{data,recordings,certs}
 install -m 0755 "$bin_dir/uavnavd" "$bin_dir/uavnav" "$rootfs/usr/local/bin/"
 # Debug info is most of a dev binary's size (hundreds of MB); the image needs none of it.
 if command -v strip >/dev/null; then strip --strip-debug "$rootfs"/usr/local/bin/*; fi

@@ -6,6 +6,8 @@
 #  1. builds the image (docker/build.sh; default --no-pull --profile dev, which reuses the target/debug
 #     binaries `cargo test --workspace` built);
 #  2. `compose up -d` under a unique project name, with free host ports; waits until uavnavd is healthy;
+#     the deployment is secure: plaintext, no certificate and a ground station resetting a drone are
+#     refused, the operator's certificate gets in (the `security` step);
 #  3. poses of EVERY simulated drone reach the ground station's CSV within a bound, and their
 #     horizontal error against the recording's truth is within a few metres;
 #  4. `docker network disconnect` of one drone container: its vehicles' inputs go stale (the service's
@@ -112,8 +114,10 @@ trap 'exit 130' INT TERM
 cid_of() {
     docker ps -aq --filter "label=com.docker.compose.project=$project" --filter "label=com.docker.compose.service=$1" | head -n1
 }
-# The service's own view, through our CLI inside the uavnavd container.
-in_service() { docker exec "$svc" /usr/local/bin/uavnav "$@" --from grpc://127.0.0.1:50051; }
+# The service's own view, through our CLI inside the uavnavd container, as the operator (`ops`).
+tls_as() { printf -- '--tls-ca /certs/ca.pem --tls-cert /certs/%s.pem --tls-key /certs/%s.key' "$1" "$1"; }
+# shellcheck disable=SC2046 # word splitting of tls_as is intended
+in_service() { docker exec "$svc" /usr/local/bin/uavnav "$@" --from grpcs://localhost:50051 $(tls_as ops); }
 ids_of() { local p=$1; for k in $(seq 0 $((DRONES_PER_CONTAINER - 1))); do printf '%s%s ' "$p" "$k"; done; }
 # "id:age" for the given ids, from `uavnav vehicles --json` (age "null" when never fed).
 ages() {
@@ -161,7 +165,21 @@ until [ "$(docker inspect -f '{{.State.Health.Status}}' "$svc")" = healthy ]; do
     sleep 1
 done
 t_healthy_s=$(since "$t_up")
-say "uavnavd healthy $t_healthy_s s after compose up; /readyz: $(curl -fsS "http://127.0.0.1:$http_port/readyz" 2>/dev/null || echo '(curl failed)')"
+docker cp "$svc:/certs/ca.pem" "$tmp/ca.pem" || fail "no CA certificate in the certs volume"
+say "uavnavd healthy $t_healthy_s s after compose up; /readyz over TLS: $(curl -fsS --cacert "$tmp/ca.pem" "https://localhost:$http_port/readyz" 2>/dev/null || echo '(curl failed)')"
+
+# --- security: nothing gets in without the deployment's certificates and grants -------------------
+refused() { # refused WHAT CMD...: the command must fail
+    local what=$1; shift
+    if "$@" >/dev/null 2>&1; then fail "security: $what was let in"; fi
+    say "security: $what refused"
+}
+refused "plaintext gRPC" docker exec "$svc" /usr/local/bin/uavnav vehicles --from grpc://127.0.0.1:50051
+refused "TLS without a client certificate" docker exec "$svc" /usr/local/bin/uavnav vehicles \
+    --from grpcs://localhost:50051 --tls-ca /certs/ca.pem
+refused "plaintext HTTP" curl -fsS --max-time 3 "http://127.0.0.1:$http_port/readyz"
+in_service vehicles >/dev/null || fail "security: the operator's certificate was refused"
+say "security: the operator's certificate gets in"
 t_healthy=$(now)
 for s in recordings drones-a drones-b ground-station; do
     [ -n "$(cid_of "$s")" ] || fail "service $s has no container"
@@ -196,6 +214,10 @@ while :; do
     sleep 2
 done
 say "every drone has >= $MIN_ROWS poses at the ground station, $(since "$t_healthy") s after healthy"
+# The vehicle exists now: a refusal is the grant's, not an unknown vehicle's.
+# shellcheck disable=SC2046
+refused "the ground station resetting a drone" docker exec "$svc" /usr/local/bin/uavnav reset \
+    --vehicle drone-a-0 --from grpcs://localhost:50051 $(tls_as ground-station)
 for id in $drones_a $drones_b; do
     printf '    %-10s first pose at the ground station %5.1f s after healthy\n' "$id" "${first_seen[$id]}"
 done

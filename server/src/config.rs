@@ -107,6 +107,8 @@ pub struct Config {
     pub foxglove: FoxgloveConfig,
     /// Recording of accepted inputs and output poses to MCAP files.
     pub record: RecordConfig,
+    /// TLS, principals and grants.
+    pub security: crate::security::SecurityConfig,
 }
 
 /// Recording settings: every accepted input and every pose, to rotating MCAP files.
@@ -151,20 +153,24 @@ pub struct FoxgloveConfig {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct GrpcConfig {
-    /// Listen address (`0.0.0.0:50051`; port 0 picks a free port).
+    /// Listen address (`127.0.0.1:50051`; port 0 picks a free port). Off loopback it needs
+    /// `[security.tls]` or `security.insecure`.
     pub addr: SocketAddr,
     /// Largest accepted (decoded) message, bytes. Sized for 1080p JPEG frames.
     pub max_message_bytes: usize,
     /// Ingest acknowledgements buffered per stream before the stream stops reading (flow control).
     pub ack_buffer: usize,
+    /// Serve gRPC server reflection (lets any caller list the API; off by default).
+    pub reflection: bool,
 }
 
 impl Default for GrpcConfig {
     fn default() -> Self {
         Self {
-            addr: SocketAddr::from(([0, 0, 0, 0], 50051)),
+            addr: SocketAddr::from(([127, 0, 0, 1], 50051)),
             max_message_bytes: 16 << 20,
             ack_buffer: 256,
+            reflection: false,
         }
     }
 }
@@ -173,14 +179,16 @@ impl Default for GrpcConfig {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct HttpConfig {
-    /// Listen address for `/metrics`, `/livez`, `/readyz`.
+    /// Listen address for `/metrics`, `/livez`, `/readyz` (loopback by default; off loopback it
+    /// needs `[security.tls]` or `security.insecure`, and with principals `/metrics` needs a
+    /// grant of `metrics`).
     pub addr: SocketAddr,
 }
 
 impl Default for HttpConfig {
     fn default() -> Self {
         Self {
-            addr: SocketAddr::from(([0, 0, 0, 0], 9464)),
+            addr: SocketAddr::from(([127, 0, 0, 1], 9464)),
         }
     }
 }
@@ -210,7 +218,7 @@ impl Default for ZenohConfig {
         Self {
             enabled: true,
             mode: ZenohMode::Peer,
-            listen: vec!["tcp/[::]:7447".to_string()],
+            listen: vec!["tcp/127.0.0.1:7447".to_string()],
             connect: Vec::new(),
             config_file: None,
             multicast_scouting: true,
@@ -357,16 +365,17 @@ pub struct Cli {
     /// TOML config file (also `UAVNAV_CONFIG`).
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
-    /// gRPC listen address [default: 0.0.0.0:50051].
+    /// gRPC listen address [default: 127.0.0.1:50051].
     #[arg(long, value_name = "ADDR")]
     pub grpc_addr: Option<SocketAddr>,
-    /// HTTP listen address for /metrics, /livez, /readyz [default: 0.0.0.0:9464].
+    /// HTTP listen address for /metrics, /livez, /readyz [default: 127.0.0.1:9464].
     #[arg(long, value_name = "ADDR")]
     pub http_addr: Option<SocketAddr>,
     /// Zenoh session mode [default: peer].
     #[arg(long, value_enum, value_name = "MODE")]
     pub zenoh_mode: Option<ZenohMode>,
-    /// Zenoh endpoint to listen on (repeatable) [default: tcp/[::]:7447].
+    /// Zenoh endpoint to listen on (repeatable) [default: tcp/127.0.0.1:7447; tls/HOST:PORT with
+    /// [security.tls]].
     #[arg(long, value_name = "ENDPOINT")]
     pub zenoh_listen: Vec<String>,
     /// Zenoh endpoint to connect to (repeatable).
@@ -388,6 +397,13 @@ pub struct Cli {
     /// (see [record] in the config file for rotation and retention) [default: off].
     #[arg(long, value_name = "DIR")]
     pub record_dir: Option<PathBuf>,
+    /// Allow listeners without TLS off loopback (security.insecure): anyone on the network can
+    /// then read and forge traffic. Said loudly at startup.
+    #[arg(long)]
+    pub insecure: bool,
+    /// Serve gRPC server reflection (grpc.reflection) [default: off].
+    #[arg(long)]
+    pub grpc_reflection: bool,
 }
 
 /// Environment variables read by [`Config::load`], with the key each overrides.
@@ -405,6 +421,7 @@ pub const ENV_VARS: &[(&str, &str)] = &[
     ("UAVNAV_LOG", "log.filter"),
     ("UAVNAV_FOXGLOVE_ADDR", "foxglove.addr"),
     ("UAVNAV_RECORD_DIR", "record.directory"),
+    ("UAVNAV_INSECURE", "security.insecure"),
 ];
 
 impl Config {
@@ -503,6 +520,9 @@ impl Config {
         if let Some(v) = env("UAVNAV_RECORD_DIR") {
             self.record.directory = Some(PathBuf::from(v)).filter(|d| !d.as_os_str().is_empty());
         }
+        if let Some(v) = env("UAVNAV_INSECURE") {
+            self.security.insecure = parse("UAVNAV_INSECURE", v)?;
+        }
         Ok(())
     }
 
@@ -537,6 +557,12 @@ impl Config {
         }
         if let Some(d) = &cli.record_dir {
             self.record.directory = Some(d.clone());
+        }
+        if cli.insecure {
+            self.security.insecure = true;
+        }
+        if cli.grpc_reflection {
+            self.grpc.reflection = true;
         }
     }
 
@@ -600,6 +626,9 @@ impl Config {
         if !(r.rotate_s > 0.0 && r.rotate_s.is_finite()) {
             return bad("record.rotate_s must be > 0");
         }
+        crate::security::Authorizer::new(&self.security.principals)
+            .map_err(|e| ConfigError::Invalid(e.to_string()))?;
+        crate::security::exposure(self).map_err(ConfigError::Invalid)?;
         Ok(())
     }
 }

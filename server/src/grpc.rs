@@ -18,8 +18,10 @@ use uavnav_proto::v1 as pb;
 use uavnav_proto::v1::uav_nav_server::UavNav;
 
 use crate::hub::PoseBatch;
-use crate::ingest::{Ingestor, Payload};
+use crate::ingest::Payload;
 use crate::metrics::{Cause, Kind, Outcome, Transport};
+use crate::security::{Access, PeerInfo};
+use crate::service::Service;
 use crate::validate;
 
 /// Outgoing message queue of one watch stream.
@@ -28,21 +30,38 @@ const WATCH_QUEUE: usize = 1024;
 /// The service implementation.
 #[derive(Debug, Clone)]
 pub struct UavNavService {
-    ingestor: Ingestor,
+    service: Service,
     ack_buffer: usize,
 }
 
 impl UavNavService {
-    /// A service over `ingestor`.
-    pub fn new(ingestor: Ingestor, ack_buffer: usize) -> Self {
+    /// The gRPC adapter of `service`.
+    pub fn new(service: Service, ack_buffer: usize) -> Self {
         Self {
-            ingestor,
+            service,
             ack_buffer,
         }
     }
 
     fn stopping(&self) -> watch::Receiver<bool> {
-        self.ingestor.registry().ctx().hub.stopping.clone()
+        self.service.ingestor().registry().ctx().hub.stopping.clone()
+    }
+
+    /// Who is calling: the verified client certificate of the connection (TLS) and the
+    /// `authorization` metadata. Refused before the request's body is read.
+    fn access<T>(&self, request: &Request<T>) -> Result<Access, Status> {
+        let names = request
+            .extensions()
+            .get::<PeerInfo>()
+            .map(|p| p.cert_names.clone())
+            .unwrap_or_default();
+        let token = request
+            .metadata()
+            .get("authorization")
+            .map(|v| v.as_bytes());
+        self.service
+            .authenticate("grpc", &names, token)
+            .map_err(|e| Status::unauthenticated(e.to_string()))
     }
 
     /// A watch stream over `rx` that ends with the service and counts its skips in
@@ -52,7 +71,7 @@ impl UavNavService {
         rx: broadcast::Receiver<Arc<T>>,
         sel: Selector,
     ) -> BoxStream<T::Out> {
-        let lagged = self.ingestor.registry().ctx().metrics.watch_lagged.clone();
+        let lagged = self.service.metrics().watch_lagged.clone();
         watch_stream(rx, sel, self.stopping(), lagged)
     }
 }
@@ -126,11 +145,11 @@ pub async fn remap_transport_status<B>(
     resp
 }
 
-async fn ack_envelope(ingestor: &Ingestor, e: pb::SensorEnvelope) -> pb::IngestAck {
+async fn ack_envelope(service: &Service, access: &Access, e: pb::SensorEnvelope) -> pb::IngestAck {
     let verdict = match e.payload.as_ref().map(Payload::from) {
-        Some(p) => ingestor.submit(Transport::Grpc, &e.vehicle_id, p).await,
+        Some(p) => service.feed(access, Transport::Grpc, &e.vehicle_id, p).await,
         None => {
-            let metrics = &ingestor.registry().ctx().metrics;
+            let metrics = service.metrics();
             metrics.input(Transport::Grpc, Kind::Malformed, Outcome::Invalid, 1);
             metrics.refuse(Transport::Grpc, Kind::Malformed, Cause::Missing);
             crate::ingest::Verdict {
@@ -319,11 +338,12 @@ impl UavNav for UavNavService {
         &self,
         request: Request<Streaming<pb::SensorEnvelope>>,
     ) -> Result<Response<Self::IngestStream>, Status> {
+        let access = self.access(&request)?;
         let mut inbound = request.into_inner();
         // Bounded: when the client stops reading acks we stop reading envelopes (HTTP/2 flow
         // control then pushes back on the sender).
         let (tx, rx) = mpsc::channel(self.ack_buffer);
-        let ingestor = self.ingestor.clone();
+        let service = self.service.clone();
         let mut stopping = self.stopping();
         tokio::spawn(async move {
             loop {
@@ -337,7 +357,7 @@ impl UavNav for UavNavService {
                     Some(Err(status)) => {
                         let status = remap_decode_status(status);
                         if let Some(cause) = stream_cause(&status) {
-                            let metrics = &ingestor.registry().ctx().metrics;
+                            let metrics = service.metrics();
                             let outcome = match cause {
                                 Cause::TooLarge => Outcome::Exhausted,
                                 _ => Outcome::Invalid,
@@ -349,7 +369,7 @@ impl UavNav for UavNavService {
                         break;
                     }
                     Some(Ok(envelope)) => {
-                        let ack = ack_envelope(&ingestor, envelope).await;
+                        let ack = ack_envelope(&service, &access, envelope).await;
                         if tx.send(Ok(ack)).await.is_err() {
                             break;
                         }
@@ -364,8 +384,12 @@ impl UavNav for UavNavService {
         &self,
         request: Request<pb::WatchRequest>,
     ) -> Result<Response<Self::WatchPosesStream>, Status> {
+        let access = self.access(&request)?;
         let sel = Selector::from_request(request.get_ref())?;
-        let rx = self.ingestor.registry().ctx().hub.poses.subscribe();
+        self.service
+            .authorize_watch(&access, &sel.ids, &sel.prefix, sel.all)
+            .map_err(|e| e.to_status())?;
+        let rx = self.service.ingestor().registry().ctx().hub.poses.subscribe();
         Ok(Response::new(self.watch(rx, sel)))
     }
 
@@ -373,8 +397,12 @@ impl UavNav for UavNavService {
         &self,
         request: Request<pb::WatchRequest>,
     ) -> Result<Response<Self::WatchHealthStream>, Status> {
+        let access = self.access(&request)?;
         let sel = Selector::from_request(request.get_ref())?;
-        let rx = self.ingestor.registry().ctx().hub.health.subscribe();
+        self.service
+            .authorize_watch(&access, &sel.ids, &sel.prefix, sel.all)
+            .map_err(|e| e.to_status())?;
+        let rx = self.service.ingestor().registry().ctx().hub.health.subscribe();
         Ok(Response::new(self.watch(rx, sel)))
     }
 
@@ -382,12 +410,12 @@ impl UavNav for UavNavService {
         &self,
         request: Request<pb::GetPoseRequest>,
     ) -> Result<Response<pb::PoseEstimate>, Status> {
+        let access = self.access(&request)?;
         let id = &request.get_ref().vehicle_id;
-        validate::vehicle_id(id).map_err(|e| e.to_status())?;
         let h = self
-            .ingestor
-            .registry()
-            .get(id)
+            .service
+            .watched_vehicle(&access, id)
+            .map_err(|e| e.to_status())?
             .ok_or_else(|| unknown_vehicle(id))?;
         let pose = h
             .shared
@@ -400,10 +428,10 @@ impl UavNav for UavNavService {
         &self,
         request: Request<pb::ListVehiclesRequest>,
     ) -> Result<Response<pb::ListVehiclesResponse>, Status> {
+        let access = self.access(&request)?;
         let vehicles = self
-            .ingestor
-            .registry()
-            .list(&request.get_ref().id_prefix)
+            .service
+            .list(&access, &request.get_ref().id_prefix)
             .iter()
             .map(summary_of)
             .collect();
@@ -414,6 +442,7 @@ impl UavNav for UavNavService {
         &self,
         request: Request<pb::ConfigureVehicleRequest>,
     ) -> Result<Response<pb::ConfigureVehicleResponse>, Status> {
+        let access = self.access(&request)?;
         let r = request.get_ref();
         validate::vehicle_id(&r.vehicle_id).map_err(|e| e.to_status())?;
         let config = r
@@ -421,8 +450,8 @@ impl UavNav for UavNavService {
             .as_ref()
             .ok_or_else(|| Status::invalid_argument("config: required"))?;
         let created = self
-            .ingestor
-            .configure(&r.vehicle_id, config, true)
+            .service
+            .configure(&access, &r.vehicle_id, config, true)
             .await
             .map_err(|e| e.to_status())?;
         Ok(Response::new(pb::ConfigureVehicleResponse { created }))
@@ -432,8 +461,14 @@ impl UavNav for UavNavService {
         &self,
         request: Request<pb::ResetVehicleRequest>,
     ) -> Result<Response<pb::ResetVehicleResponse>, Status> {
+        let access = self.access(&request)?;
         let id = &request.get_ref().vehicle_id;
-        match self.ingestor.reset(id).await.map_err(|e| e.to_status())? {
+        match self
+            .service
+            .reset(&access, id)
+            .await
+            .map_err(|e| e.to_status())?
+        {
             Some(()) => Ok(Response::new(pb::ResetVehicleResponse {})),
             None => Err(unknown_vehicle(id)),
         }

@@ -1,16 +1,21 @@
 //! The HTTP side port: Prometheus `/metrics`, `/livez` (the process answers) and `/readyz`
 //! (serving and not shutting down).
+//!
+//! With principals configured, `/metrics` needs an `authorization: Bearer` token of a principal
+//! granted `metrics` (401 without a recognised token, 403 without the grant); the probes stay
+//! open (an orchestrator's probe carries no credentials, and they tell nothing about vehicles).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use axum::Router;
 use axum::extract::State;
-use axum::http::{StatusCode, header};
+use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::IntoResponse;
 use axum::routing::get;
 
 use crate::metrics::Metrics;
+use crate::service::Service;
 
 /// What the HTTP handlers read.
 #[derive(Debug, Clone)]
@@ -19,6 +24,8 @@ pub struct HttpState {
     pub metrics: Metrics,
     /// Whether the service is ready (all transports up, not stopping).
     pub ready: Arc<AtomicBool>,
+    /// The facade (who may read the metrics).
+    pub service: Service,
 }
 
 /// The router.
@@ -30,7 +37,27 @@ pub fn router(state: HttpState) -> Router {
         .with_state(state)
 }
 
-async fn metrics(State(s): State<HttpState>) -> impl IntoResponse {
+async fn metrics(State(s): State<HttpState>, headers: HeaderMap) -> axum::response::Response {
+    let token = headers.get(header::AUTHORIZATION).map(|v| v.as_bytes());
+    let access = match s.service.authenticate("http", &[], token) {
+        Ok(a) => a,
+        Err(e) => {
+            return (
+                StatusCode::UNAUTHORIZED,
+                [(header::WWW_AUTHENTICATE, "Bearer")],
+                format!("{e}\n"),
+            )
+                .into_response();
+        }
+    };
+    if !s.service.may_read_metrics(&access) {
+        s.service.count_metrics_refusal(&access);
+        return (
+            StatusCode::FORBIDDEN,
+            format!("{:?} has no grant of `metrics`\n", access.name()),
+        )
+            .into_response();
+    }
     (
         [(
             header::CONTENT_TYPE,
@@ -38,6 +65,7 @@ async fn metrics(State(s): State<HttpState>) -> impl IntoResponse {
         )],
         s.metrics.encode(),
     )
+        .into_response()
 }
 
 async fn readyz(State(s): State<HttpState>) -> impl IntoResponse {

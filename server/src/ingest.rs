@@ -122,7 +122,7 @@ impl Ingestor {
             Ok(v) => v,
             Err(r) => {
                 self.registry.ctx().metrics.refuse(transport, kind, r.cause);
-                tracing::debug!(vehicle = %id, ?kind, reason = %r.reason, "input refused");
+                tracing::debug!(vehicle = ?id, ?kind, reason = ?r.reason, "input refused");
                 if let Some(h) = self.registry.get(id) {
                     let st = &h.shared.stats;
                     let counter = match r.status {
@@ -142,7 +142,9 @@ impl Ingestor {
             pb::IngestStatus::Late => Some(Outcome::Late),
             pb::IngestStatus::OutOfRange => Some(Outcome::Future),
             pb::IngestStatus::ResourceExhausted => Some(Outcome::Exhausted),
-            pb::IngestStatus::Unspecified => Some(Outcome::Invalid),
+            pb::IngestStatus::Unspecified | pb::IngestStatus::PermissionDenied => {
+                Some(Outcome::Invalid)
+            }
         };
         if let Some(o) = outcome {
             self.registry.ctx().metrics.input(transport, kind, o, 1);
@@ -368,7 +370,7 @@ impl Ingestor {
     ) -> Result<(), Rejection> {
         VehicleStats::add(&h.shared.stats.resyncs, 1);
         self.registry.ctx().metrics.resync(direction);
-        tracing::info!(vehicle = %id, ?direction, "vehicle clock jumped; stream taken back at its new time (estimator reset)");
+        tracing::info!(vehicle = ?id, ?direction, "vehicle clock jumped; stream taken back at its new time (estimator reset)");
         self.send(h, id, Msg::Reset { reply: None }).await
     }
 

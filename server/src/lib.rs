@@ -14,6 +14,7 @@
 //! | [`engine`] | the seam to the estimator ([`engine::Engine`]) |
 //! | [`runner_engine`] | the product engine (the estimator runner) |
 //! | [`vision_pool`] | bounded OS-thread pool for vision work |
+//! | [`service`] | the transport-neutral facade the adapters call: authorization per request and message, then ingest or the registry |
 //! | [`ingest`] | the transport-neutral ingest path (validate, gate, route, count) |
 //! | [`validate`] | field-by-field input checks with precise statuses |
 //! | [`grpc`] | the tonic `uavnav.v1.UavNav` service |
@@ -24,6 +25,7 @@
 //! | [`metrics`] | Prometheus metrics |
 //! | [`record`] | recording of accepted inputs and poses to rotating MCAP files |
 //! | [`http`] | `/metrics`, `/livez`, `/readyz` |
+//! | [`security`] | TLS (reloadable), principals and grants, the Zenoh access control, the exposure check |
 //! | [`shutdown`] | signals and the drain order |
 //! | [`logging`] | `tracing` subscriber setup |
 
@@ -41,6 +43,8 @@ pub mod record;
 pub mod registry;
 pub mod reorder;
 pub mod runner_engine;
+pub mod security;
+pub mod service;
 pub mod server;
 pub mod shutdown;
 pub mod validate;

@@ -97,6 +97,8 @@ pub enum Cause {
     CorruptImage,
     /// A camera frame whose decoded size is not its header's.
     ImageSize,
+    /// The caller has no grant for this vehicle (also in `uavnav_auth_refused_total`).
+    PermissionDenied,
 }
 
 /// Why the recorder dropped a message: the `reason` label of `uavnav_record_dropped_total`.
@@ -141,6 +143,7 @@ lowercase_label!(Cause {
     Compression => "compression",
     CorruptImage => "corrupt_image",
     ImageSize => "image_size",
+    PermissionDenied => "permission_denied",
 });
 lowercase_label!(RecordDrop { QueueFull => "queue_full", Lagged => "lagged", WriteError => "write_error" });
 lowercase_label!(Outcome {
@@ -265,6 +268,8 @@ pub struct Metrics {
     pub frames_rejected: Family<FrameRejectLabels, Counter>,
     /// Estimator resets after a non-finite state (the vehicle reported DIVERGED).
     pub divergence_resets: Counter,
+    /// Authentication and authorization refusals, TLS handshake failures.
+    pub security: crate::security::SecurityMetrics,
 }
 
 impl Metrics {
@@ -413,6 +418,7 @@ impl Metrics {
             "Poses, GNSS fixes and camera frames the Foxglove live view skipped because it was behind",
             foxglove_dropped.clone(),
         );
+        let security = crate::security::SecurityMetrics::register(&mut registry);
         Self {
             registry: Arc::new(registry),
             inputs,
@@ -440,6 +446,7 @@ impl Metrics {
             clock_resyncs,
             frames_rejected,
             divergence_resets,
+            security,
         }
     }
 

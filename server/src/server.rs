@@ -8,6 +8,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use anyhow::{Context, anyhow};
+use futures::StreamExt;
 use tokio::sync::{oneshot, watch};
 use tokio::task::JoinHandle;
 use tonic::codec::CompressionEncoding;
@@ -24,6 +25,9 @@ use crate::ingest::Ingestor;
 use crate::metrics::Metrics;
 use crate::record::Recorder;
 use crate::registry::Registry;
+use crate::security::tls::{self, Alpn, CertStore, HttpTlsListener};
+use crate::security::{Authorizer, exposure};
+use crate::service::Service;
 use crate::validate::ImageLimits;
 use crate::vision_pool::VisionPool;
 use crate::zenoh_io::ZenohIo;
@@ -69,6 +73,23 @@ impl Server {
         factory: SharedFactory,
     ) -> anyhow::Result<RunningServer> {
         let (mut ingestor, stop_tx) = ingest_path(&config, factory)?;
+        for w in exposure(&config).map_err(|e| anyhow!(e))? {
+            warn!("{w}");
+        }
+        let auth = Arc::new(
+            Authorizer::new(&config.security.principals).map_err(|e| anyhow!(e))?,
+        );
+        let certs = match &config.security.tls {
+            Some(t) => {
+                let store = CertStore::load(t)?;
+                store.spawn_reloader(
+                    stop_tx.subscribe(),
+                    ingestor.registry().ctx().metrics.security.tls_reload_failures.clone(),
+                );
+                Some(store)
+            }
+            None => None,
+        };
         let registry = Arc::clone(ingestor.registry());
         let (metrics, hub) = (registry.ctx().metrics.clone(), registry.ctx().hub.clone());
         let pool = Arc::clone(&registry.ctx().pool);
@@ -95,28 +116,42 @@ impl Server {
             None => None,
         };
 
+        let service = Service::new(ingestor, auth);
         let zenoh = if config.zenoh.enabled {
-            Some(ZenohIo::start(&config.zenoh, ingestor.clone(), hub.clone()).await?)
+            Some(ZenohIo::start(&config.zenoh, &config.security, service.clone(), hub.clone()).await?)
         } else {
             None
         };
         let (health, health_service) = tonic_health::server::health_reporter();
         health.set_serving::<UavNavServer<UavNavService>>().await;
-        let (grpc_addr, grpc) = serve_grpc(&config, ingestor, health_service).await?;
+        let stop = stop_tx.subscribe();
+        let (grpc_addr, grpc) =
+            serve_grpc(&config, service.clone(), health_service, certs.clone(), stop.clone())
+                .await?;
         let ready = Arc::new(AtomicBool::new(true));
         let (http_addr, http) = serve_http(
             config.http.addr,
             HttpState {
                 metrics,
                 ready: Arc::clone(&ready),
+                service,
             },
+            certs.clone(),
+            stop,
         )
         .await?;
         let zenoh_locators = zenoh
             .as_ref()
             .map(|z| z.locators.clone())
             .unwrap_or_default();
-        info!(%grpc_addr, %http_addr, zenoh = ?zenoh_locators, "uavnavd serving");
+        info!(
+            %grpc_addr,
+            %http_addr,
+            zenoh = ?zenoh_locators,
+            tls = certs.is_some(),
+            authorization = !config.security.principals.is_empty(),
+            "uavnavd serving"
+        );
         Ok(RunningServer {
             grpc_addr,
             http_addr,
@@ -188,75 +223,121 @@ async fn forward_poses(hub: Hub, tap: LiveTap) {
 
 async fn serve_grpc(
     config: &Config,
-    ingestor: Ingestor,
+    service: Service,
     health_service: tonic_health::pb::health_server::HealthServer<
         impl tonic_health::pb::health_server::Health,
     >,
+    certs: Option<Arc<CertStore>>,
+    stop: watch::Receiver<bool>,
 ) -> anyhow::Result<(SocketAddr, (JoinHandle<()>, oneshot::Sender<()>))> {
     let max = config.grpc.max_message_bytes;
-    let service = UavNavServer::new(UavNavService::new(ingestor, config.grpc.ack_buffer))
+    let tls_failures = service.metrics().security.tls_failures.clone();
+    let uavnav = UavNavServer::new(UavNavService::new(service, config.grpc.ack_buffer))
         .max_decoding_message_size(max)
         .max_encoding_message_size(max)
         .accept_compressed(CompressionEncoding::Gzip)
         .accept_compressed(CompressionEncoding::Zstd)
         .send_compressed(CompressionEncoding::Gzip)
         .send_compressed(CompressionEncoding::Zstd);
-    let fds = uavnav_proto::FILE_DESCRIPTOR_SET;
-    let reflection_v1 = tonic_reflection::server::Builder::configure()
-        .register_encoded_file_descriptor_set(fds)
-        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
-        .build_v1()
-        .map_err(|e| anyhow!("reflection v1: {e}"))?;
-    let reflection_v1alpha = tonic_reflection::server::Builder::configure()
-        .register_encoded_file_descriptor_set(fds)
-        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
-        .build_v1alpha()
-        .map_err(|e| anyhow!("reflection v1alpha: {e}"))?;
     let listener = tokio::net::TcpListener::bind(config.grpc.addr)
         .await
         .with_context(|| format!("binding gRPC on {}", config.grpc.addr))?;
     let addr = listener.local_addr()?;
-    let incoming = tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true));
     let (stop_tx, stop_rx) = oneshot::channel::<()>();
-    let router = tonic::transport::Server::builder()
+    // The health service stays open to every caller (probes carry no credentials); reflection
+    // lists the whole API, so it is served only when asked for.
+    let mut router = tonic::transport::Server::builder()
         .layer(axum::middleware::map_response(
             remap_transport_status::<tonic::body::Body>,
         ))
-        .add_service(service)
-        .add_service(health_service)
-        .add_service(reflection_v1)
-        .add_service(reflection_v1alpha);
-    let task = tokio::spawn(async move {
-        if let Err(e) = router
-            .serve_with_incoming_shutdown(incoming, async {
-                let _ = stop_rx.await;
+        .add_service(uavnav)
+        .add_service(health_service);
+    if config.grpc.reflection {
+        let fds = uavnav_proto::FILE_DESCRIPTOR_SET;
+        let reflection_v1 = tonic_reflection::server::Builder::configure()
+            .register_encoded_file_descriptor_set(fds)
+            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+            .build_v1()
+            .map_err(|e| anyhow!("reflection v1: {e}"))?;
+        let reflection_v1alpha = tonic_reflection::server::Builder::configure()
+            .register_encoded_file_descriptor_set(fds)
+            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+            .build_v1alpha()
+            .map_err(|e| anyhow!("reflection v1alpha: {e}"))?;
+        router = router
+            .add_service(reflection_v1)
+            .add_service(reflection_v1alpha);
+    }
+    let shutdown = async {
+        let _ = stop_rx.await;
+    };
+    let task = match certs {
+        Some(store) => {
+            let conns = tls::accept(listener, store, Alpn::Grpc, tls_failures, stop);
+            let incoming = tokio_stream::wrappers::ReceiverStream::new(conns)
+                .map(Ok::<_, std::io::Error>);
+            tokio::spawn(async move {
+                if let Err(e) = router
+                    .serve_with_incoming_shutdown(incoming, shutdown)
+                    .await
+                {
+                    warn!(error = %e, "gRPC server ended with an error");
+                }
             })
-            .await
-        {
-            warn!(error = %e, "gRPC server ended with an error");
         }
-    });
+        None => {
+            let incoming =
+                tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true));
+            tokio::spawn(async move {
+                if let Err(e) = router
+                    .serve_with_incoming_shutdown(incoming, shutdown)
+                    .await
+                {
+                    warn!(error = %e, "gRPC server ended with an error");
+                }
+            })
+        }
+    };
     Ok((addr, (task, stop_tx)))
 }
 
 async fn serve_http(
     addr: SocketAddr,
     state: HttpState,
+    certs: Option<Arc<CertStore>>,
+    stop: watch::Receiver<bool>,
 ) -> anyhow::Result<(SocketAddr, (JoinHandle<()>, oneshot::Sender<()>))> {
     let listener = tokio::net::TcpListener::bind(addr)
         .await
         .with_context(|| format!("binding HTTP on {addr}"))?;
     let bound = listener.local_addr()?;
     let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let failures = state.service.metrics().security.tls_failures.clone();
     let app = router(state);
-    let task = tokio::spawn(async move {
-        let serve = axum::serve(listener, app).with_graceful_shutdown(async {
-            let _ = stop_rx.await;
-        });
-        if let Err(e) = serve.await {
-            warn!(error = %e, "HTTP server ended with an error");
+    let shutdown = async {
+        let _ = stop_rx.await;
+    };
+    let task = match certs {
+        Some(store) => {
+            let conns = tls::accept(listener, store, Alpn::Http, failures, stop);
+            let listener = HttpTlsListener {
+                conns,
+                local: bound,
+            };
+            tokio::spawn(async move {
+                let serve = axum::serve(listener, app).with_graceful_shutdown(shutdown);
+                if let Err(e) = serve.await {
+                    warn!(error = %e, "HTTP server ended with an error");
+                }
+            })
         }
-    });
+        None => tokio::spawn(async move {
+            let serve = axum::serve(listener, app).with_graceful_shutdown(shutdown);
+            if let Err(e) = serve.await {
+                warn!(error = %e, "HTTP server ended with an error");
+            }
+        }),
+    };
     Ok((bound, (task, stop_tx)))
 }
 

@@ -78,6 +78,7 @@ impl Rejection {
             pb::IngestStatus::ResourceExhausted => tonic::Code::ResourceExhausted,
             pb::IngestStatus::OutOfRange => tonic::Code::OutOfRange,
             pb::IngestStatus::Late => tonic::Code::OutOfRange,
+            pb::IngestStatus::PermissionDenied => tonic::Code::PermissionDenied,
             _ => tonic::Code::Unknown,
         };
         tonic::Status::new(code, self.reason.clone())

@@ -27,6 +27,8 @@ use zenoh::liveliness::LivelinessToken;
 use crate::config::ZenohConfig;
 use crate::hub::{Hub, PoseBatch};
 use crate::ingest::{Ingestor, Payload};
+use crate::security::{Access, SecurityConfig};
+use crate::service::Service;
 use crate::metrics::{Kind, Outcome, Transport};
 use crate::vehicle::VehicleStats;
 
@@ -53,7 +55,7 @@ pub fn encoding(full_name: &str) -> Encoding {
 }
 
 /// Builds the session configuration from ours (the JSON5 file first, then our keys on top).
-pub fn session_config(cfg: &ZenohConfig) -> anyhow::Result<zenoh::Config> {
+pub fn session_config(cfg: &ZenohConfig, sec: &SecurityConfig) -> anyhow::Result<zenoh::Config> {
     let mut z = match &cfg.config_file {
         Some(path) => zenoh::Config::from_file(path)
             .map_err(|e| anyhow!("zenoh config {}: {e}", path.display()))?,
@@ -72,6 +74,7 @@ pub fn session_config(cfg: &ZenohConfig) -> anyhow::Result<zenoh::Config> {
         "scouting/multicast/enabled",
         cfg.multicast_scouting.to_string(),
     )?;
+    crate::security::zenoh::apply(&mut z, sec)?;
     Ok(z)
 }
 
@@ -95,8 +98,14 @@ pub struct ZenohIo {
 
 impl ZenohIo {
     /// Opens the session and starts the input, output and query tasks.
-    pub async fn start(cfg: &ZenohConfig, ingestor: Ingestor, hub: Hub) -> anyhow::Result<Self> {
-        let session = zenoh::open(session_config(cfg)?)
+    pub async fn start(
+        cfg: &ZenohConfig,
+        sec: &SecurityConfig,
+        service: Service,
+        hub: Hub,
+    ) -> anyhow::Result<Self> {
+        let ingestor = service.ingestor().clone();
+        let session = zenoh::open(session_config(cfg, sec)?)
             .await
             .map_err(|e| anyhow!("opening the zenoh session: {e}"))?;
         // Zenoh 1.x does not expose the bound locators on the session: report the configured ones.
@@ -113,7 +122,7 @@ impl ZenohIo {
             .map_err(|e| anyhow!("declaring the service liveliness token: {e}"))
             .context("zenoh.instance must be a valid key chunk")?;
         let mut tasks = Vec::new();
-        tasks.push(spawn_inputs(&session, ingestor.clone()).await?);
+        tasks.push(spawn_inputs(&session, service).await?);
         tasks.push(spawn_queries(&session, ingestor.clone()).await?);
         tasks.push(spawn_liveliness(
             &session,
@@ -174,7 +183,8 @@ fn default_instance() -> String {
 /// Input samples buffered between Zenoh's receive thread and the decoding shards.
 const ZENOH_INPUT_BUFFER: usize = 16_384;
 
-async fn spawn_inputs(session: &Session, ingestor: Ingestor) -> anyhow::Result<JoinHandle<()>> {
+async fn spawn_inputs(session: &Session, service: Service) -> anyhow::Result<JoinHandle<()>> {
+    let ingestor = service.ingestor().clone();
     let sub = session
         .declare_subscriber(keys::EVERY_VEHICLE_LEAF)
         // Zenoh's receive thread blocks when this is full, and a link blocked for longer than
@@ -189,7 +199,7 @@ async fn spawn_inputs(session: &Session, ingestor: Ingestor) -> anyhow::Result<J
     for _ in 0..SHARDS {
         let (tx, rx) = mpsc::channel::<zenoh::sample::Sample>(1024);
         shards.push(tx);
-        shard_tasks.push(tokio::spawn(decode_loop(rx, ingestor.clone(), max_bytes)));
+        shard_tasks.push(tokio::spawn(decode_loop(rx, service.clone(), max_bytes)));
     }
     Ok(tokio::spawn(async move {
         let _guard = AbortOnDrop(shard_tasks);
@@ -221,9 +231,13 @@ fn shard_of(id: &str) -> usize {
 
 async fn decode_loop(
     mut rx: mpsc::Receiver<zenoh::sample::Sample>,
-    ingestor: Ingestor,
+    service: Service,
     max_bytes: usize,
 ) {
+    let ingestor = service.ingestor();
+    // Zenoh samples carry no caller identity: the grants are enforced per link by the session's
+    // access control (`security::zenoh`), so what arrives here was allowed there.
+    let access = Access::Open;
     while let Some(sample) = rx.recv().await {
         let Some((id, leaf)) = keys::split(sample.key_expr().as_str()) else {
             continue;
@@ -236,7 +250,7 @@ async fn decode_loop(
         let bytes = sample.payload().to_bytes();
         if bytes.len() > max_bytes {
             reject(
-                &ingestor,
+                ingestor,
                 id,
                 kind,
                 Outcome::Exhausted,
@@ -251,7 +265,7 @@ async fn decode_loop(
             match uavnav_proto::wire::count_field(&bytes, 1) {
                 Ok(n) if n > limit => {
                     reject(
-                        &ingestor,
+                        ingestor,
                         id,
                         kind,
                         Outcome::Exhausted,
@@ -262,7 +276,7 @@ async fn decode_loop(
                 Ok(_) => {}
                 Err(e) => {
                     reject(
-                        &ingestor,
+                        ingestor,
                         id,
                         kind,
                         Outcome::Invalid,
@@ -276,16 +290,17 @@ async fn decode_loop(
         let Some(decoded) = leaf.decode_input(&bytes) else {
             continue;
         };
-        let verdict = decoded.map(|m| (ingestor.clone(), id.to_owned(), m));
-        match verdict {
-            Ok((ing, id, msg)) => {
-                let v = ing.submit(Transport::Zenoh, &id, Payload::from(&msg)).await;
+        match decoded {
+            Ok(msg) => {
+                let v = service
+                    .feed(&access, Transport::Zenoh, id, Payload::from(&msg))
+                    .await;
                 if v.status != pb::IngestStatus::Accepted {
-                    debug!(vehicle = %id, status = ?v.status, reason = %v.reason, "zenoh input refused");
+                    debug!(vehicle = ?id, status = ?v.status, reason = %v.reason, "zenoh input refused");
                 }
             }
             Err(e) => reject(
-                &ingestor,
+                ingestor,
                 id,
                 kind,
                 Outcome::Invalid,
@@ -308,7 +323,7 @@ fn reject(ingestor: &Ingestor, id: &str, kind: Kind, outcome: Outcome, reason: &
     if let Some(h) = ingestor.registry().get(id) {
         VehicleStats::add(&h.shared.stats.rejected, 1);
     }
-    debug!(vehicle = %id, ?kind, reason, "zenoh input refused");
+    debug!(vehicle = ?id, ?kind, reason, "zenoh input refused");
 }
 
 async fn spawn_queries(session: &Session, ingestor: Ingestor) -> anyhow::Result<JoinHandle<()>> {
@@ -381,7 +396,7 @@ fn spawn_liveliness(
                             tokens.insert(id, t);
                         }
                         Err(e) => {
-                            warn!(vehicle = %id, error = %e, "declaring the vehicle liveliness token")
+                            warn!(vehicle = ?id, error = %e, "declaring the vehicle liveliness token")
                         }
                     }
                 }

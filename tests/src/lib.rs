@@ -12,6 +12,7 @@
 //! | [`service`] | an in-process `uavnavd` on loopback (gRPC/HTTP port 0, Zenoh on a free port) with its client URLs; the loopback configuration |
 //! | [`flight`] | a shipped scenario's first seconds as sensor events with its vehicle configuration; the smoke flight as wire messages |
 //! | [`recording`] | MCAP recordings written as the service's recorder and `uavnav record` write them (a simulated flight or given inputs); a recording's poses, a directory's recordings |
+//! | [`pki`] | certificates made at test time: a CA, the service's, ground stations' (valid, expired, of a stranger CA), written as PEM files |
 //! | [`paused`] | a paused-time harness: the service's vehicle actors without transports under tokio's paused clock (idle eviction, health periods) |
 //!
 //! Map:
@@ -38,6 +39,7 @@
 pub mod flight;
 pub mod net;
 pub mod paused;
+pub mod pki;
 pub mod recording;
 pub mod service;
 pub mod wire;

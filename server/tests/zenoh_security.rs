@@ -1,0 +1,207 @@
+//! Issue 20 on Zenoh: the service listens on mutual TLS only, and its access control (derived from
+//! the same grants as gRPC, keyed on the certificate's common name) lets a ground station put only
+//! on its fleet's input keys and subscribe only to its fleet's outputs. A peer without a
+//! certificate, or with a stranger's, never connects; fleet alpha's puts on bravo's keys never
+//! create a vehicle; a forged pose and a fake service token from a ground-station certificate
+//! never reach a watcher; the admin space is closed.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
+
+mod common;
+
+use std::time::Duration;
+
+use common::*;
+use prost::Message;
+use uavnav_proto::keys::{self, Leaf};
+use uavnav_proto::v1 as pb;
+use uavnav_tests::net::{eventually, free_port};
+use uavnav_tests::pki::{Pem, Pki};
+use uavnavd::security::{Grant, PrincipalConfig, TlsConfig, Verb};
+
+fn grant(name: &str, fleet: &str, verbs: Vec<Verb>) -> PrincipalConfig {
+    PrincipalConfig {
+        name: name.into(),
+        certificate_names: vec![name.into()],
+        token_sha256: vec![],
+        grants: vec![Grant {
+            vehicles: fleet.into(),
+            verbs,
+        }],
+    }
+}
+
+/// A Zenoh client of the service over TLS, with `identity` as its certificate (None: no
+/// certificate), trusting `ca`.
+async fn station(
+    endpoint: &str,
+    ca: &std::path::Path,
+    identity: Option<&Pem>,
+) -> zenoh::Result<zenoh::Session> {
+    let mut c = zenoh::Config::default();
+    let q = |p: &std::path::Path| format!("\"{}\"", p.display());
+    c.insert_json5("mode", "\"client\"").unwrap();
+    c.insert_json5("connect/endpoints", &format!("[\"{endpoint}\"]"))
+        .unwrap();
+    c.insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
+    c.insert_json5("transport/link/tls/root_ca_certificate", &q(ca))
+        .unwrap();
+    if let Some(p) = identity {
+        c.insert_json5("transport/link/tls/connect_certificate", &q(&p.cert))
+            .unwrap();
+        c.insert_json5("transport/link/tls/connect_private_key", &q(&p.key))
+            .unwrap();
+        c.insert_json5("transport/link/tls/enable_mtls", "true")
+            .unwrap();
+    }
+    // A client that cannot reach its router fails at open instead of retrying for ever.
+    c.insert_json5("connect/timeout_ms", "3000").unwrap();
+    c.insert_json5("connect/exit_on_failure", "true").unwrap();
+    zenoh::open(c).await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn zenoh_grants_follow_the_certificate() {
+    let dir = tempfile::tempdir().unwrap();
+    let pki = Pki::new(dir.path(), "fleet");
+    let svc = pki.service("uavnavd");
+    let port = free_port();
+    let endpoint = format!("tls/localhost:{port}");
+    let mut cfg = test_config();
+    cfg.zenoh.enabled = true;
+    cfg.zenoh.mode = uavnavd::config::ZenohMode::Router;
+    cfg.zenoh.listen = vec![format!("tls/127.0.0.1:{port}")];
+    cfg.zenoh.instance = format!("sec-{port}");
+    cfg.zenoh.multicast_scouting = false;
+    cfg.security.tls = Some(TlsConfig {
+        certificate: svc.cert.clone(),
+        private_key: svc.key.clone(),
+        client_ca: Some(pki.ca.clone()),
+        require_client_certificate: true,
+        reload_s: 10.0,
+    });
+    let all = vec![Verb::Feed, Verb::Configure, Verb::Watch];
+    cfg.security.principals = vec![
+        grant("gs-alpha", "alpha-", all.clone()),
+        grant("gs-bravo", "bravo-", all),
+    ];
+    let server = start(cfg).await;
+
+    // No certificate, a stranger's certificate: no session.
+    assert!(
+        station(&endpoint, &pki.ca, None).await.is_err(),
+        "a peer without a certificate must not connect"
+    );
+    let sdir = tempfile::tempdir().unwrap();
+    let stranger = Pki::new(sdir.path(), "stranger");
+    assert!(
+        station(&endpoint, &pki.ca, Some(&stranger.client("gs-alpha")))
+            .await
+            .is_err(),
+        "a certificate of another CA must not connect"
+    );
+
+    let alpha = station(&endpoint, &pki.ca, Some(&pki.client("gs-alpha")))
+        .await
+        .unwrap();
+    let bravo = station(&endpoint, &pki.ca, Some(&pki.client("gs-bravo")))
+        .await
+        .unwrap();
+    // bravo watches its vehicle's poses with its prefix, and (in vain) everything.
+    let bravo_poses = bravo
+        .declare_subscriber(keys::vehicle_key("bravo-1", Leaf::Pose))
+        .await
+        .unwrap();
+    let bravo_wide = bravo
+        .declare_subscriber(keys::ALL_VEHICLE_KEYS)
+        .await
+        .unwrap();
+    let services = bravo
+        .liveliness()
+        .declare_subscriber(format!("{}/**", keys::SERVICE_PREFIX))
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(500)).await;
+
+    let enc = |name: &str| uavnavd::zenoh_io::encoding(name);
+    let put = async |s: &zenoh::Session, id: &str, leaf: Leaf, body: Vec<u8>, name: &str| {
+        s.put(keys::vehicle_key(id, leaf), body)
+            .encoding(enc(name))
+            .await
+            .unwrap();
+    };
+    // Positive control: each fleet feeds its own vehicle.
+    for (s, id) in [(&alpha, "alpha-1"), (&bravo, "bravo-1")] {
+        put(s, id, Leaf::Config, vehicle_config(false).encode_to_vec(), "uavnav.v1.VehicleConfig").await;
+        put(s, id, Leaf::Gnss, fix(1_000).encode_to_vec(), "uavnav.v1.GnssFix").await;
+        for k in 0..20 {
+            let b = pb::ImuBatch {
+                samples: vec![imu(2_000 + k * 5_000_000)],
+            };
+            put(s, id, Leaf::Imu, b.encode_to_vec(), "uavnav.v1.ImuBatch").await;
+        }
+    }
+    // alpha on bravo's keys: a new vehicle and an existing one.
+    put(&alpha, "bravo-2", Leaf::Config, vehicle_config(false).encode_to_vec(), "uavnav.v1.VehicleConfig").await;
+    put(&alpha, "bravo-2", Leaf::Gnss, fix(1_000).encode_to_vec(), "uavnav.v1.GnssFix").await;
+    // Forged outputs from a ground-station certificate: a pose on bravo-1's key, a service token.
+    let forged = pb::PoseEstimate {
+        vehicle_id: "bravo-1".into(),
+        t_ns: 123,
+        ..Default::default()
+    };
+    put(&alpha, "bravo-1", Leaf::Pose, forged.encode_to_vec(), "uavnav.v1.PoseEstimate").await;
+    put(&bravo, "bravo-1", Leaf::Pose, forged.encode_to_vec(), "uavnav.v1.PoseEstimate").await;
+    let _fake = alpha
+        .liveliness()
+        .declare_token(keys::service_key("impostor"))
+        .await
+        .unwrap();
+
+    let reg = server.registry().clone();
+    assert!(
+        eventually(Duration::from_secs(10), || {
+            reg.get("alpha-1").is_some_and(|h| h.shared.pose().is_some())
+                && reg.get("bravo-1").is_some_and(|h| h.shared.pose().is_some())
+        })
+        .await,
+        "both fleets' own vehicles are fed over Zenoh"
+    );
+    // bravo receives its vehicle's real poses, never the forged one, and nothing of alpha's.
+    let mut real = 0;
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(3);
+    while let Ok(Ok(s)) = tokio::time::timeout_at(deadline, bravo_poses.recv_async()).await {
+        let p = pb::PoseEstimate::decode(s.payload().to_bytes().as_ref()).unwrap();
+        assert_ne!(p.t_ns, 123, "the forged pose reached a watcher");
+        real += 1;
+    }
+    assert!(real > 0, "bravo gets its own poses");
+    while let Ok(s) = bravo_wide.try_recv() {
+        match s {
+            Some(s) => panic!("a wildcard subscription got {}", s.key_expr()),
+            None => break,
+        }
+    }
+    while let Ok(Some(t)) = services.try_recv() {
+        assert!(
+            !t.key_expr().as_str().ends_with("impostor"),
+            "a fake service token reached a watcher"
+        );
+    }
+    assert!(reg.get("bravo-2").is_none(), "alpha's puts on bravo's keys never create a vehicle");
+    let bravo1 = reg.get("bravo-1").unwrap();
+    assert_eq!(
+        bravo1.shared.stats.accepted(),
+        reg.get("alpha-1").unwrap().shared.stats.accepted(),
+        "bravo-1 got bravo's inputs only (as many as alpha-1 got from alpha)"
+    );
+    // The admin space is closed.
+    let admin = alpha.get("@/**").await.unwrap();
+    let got = tokio::time::timeout(Duration::from_secs(2), admin.recv_async()).await;
+    assert!(
+        !matches!(got, Ok(Ok(ref r)) if r.result().is_ok()),
+        "the admin space answered"
+    );
+    drop((alpha, bravo));
+    server.shutdown().await.unwrap();
+}
