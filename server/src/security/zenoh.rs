@@ -15,9 +15,10 @@
 //! where `{fleet}` is `{prefix}$*` (`*` for the empty prefix). Every principal also receives the
 //! service's own declarations (its input subscriber, its queryables, its liveliness token), so
 //! that its publishers see a match and it can discover the service; it can never declare a
-//! service token, nor publish a pose: those keys are not in any rule. A ground station must
-//! subscribe with its fleet's prefix: a broader wildcard (`uavnav/v1/vehicle/**`) is not
-//! included in its grant and gets nothing. The admin space is closed.
+//! service token, nor publish a pose: those keys are not in any rule. Every put the service
+//! sends a station is checked against that station's rules by its key, so a broader wildcard
+//! (`uavnav/v1/vehicle/**`) still gets only the station's own fleet's outputs (tested). The
+//! admin space is closed.
 
 use anyhow::anyhow;
 use uavnav_proto::keys::{self, Leaf};
