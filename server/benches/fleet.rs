@@ -8,6 +8,10 @@
 //! poses, the generator kept its schedule (p99 send lag < 50 ms) and p99 ingest-to-pose latency is
 //! ≤ 50 ms. Latency is the service's: from the envelope's arrival (`PoseEstimate.ingest_wall_ns`)
 //! to the pose reaching the output hub. RSS is sampled every second.
+//!
+//! `--tls`: the same load with security on: TLS (certificates made for the run), every client
+//! authenticated by a bearer token and every envelope authorized against a fleet grant — the cost
+//! of security on the hot path, against the plaintext rows.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use std::sync::Arc;
@@ -28,6 +32,7 @@ struct Args {
     duration_s: f64,
     batch: usize,
     clients: usize,
+    tls: bool,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -37,6 +42,7 @@ fn parse_args() -> Result<Args, String> {
         duration_s: 15.0,
         batch: 4,
         clients: 8,
+        tls: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -44,6 +50,7 @@ fn parse_args() -> Result<Args, String> {
         match arg.as_str() {
             "--bench" => {}
             "--camera" => a.camera = true,
+            "--tls" => a.tls = true,
             "--vehicles" => {
                 a.vehicles = val()?.split(',').map(|s| s.trim().parse().map_err(|e| format!("--vehicles: {e}"))).collect::<Result<_, _>>()?
             }
@@ -51,7 +58,7 @@ fn parse_args() -> Result<Args, String> {
             "--batch" => a.batch = val()?.parse().map_err(|e| format!("--batch: {e}"))?,
             "--clients" => a.clients = val()?.parse().map_err(|e| format!("--clients: {e}"))?,
             "--help" | "-h" => {
-                return Err("usage: fleet [--vehicles N,N,...] [--camera] [--duration-s S] [--batch K] [--clients C]".into())
+                return Err("usage: fleet [--vehicles N,N,...] [--camera] [--tls] [--duration-s S] [--batch K] [--clients C]".into())
             }
             other => return Err(format!("unknown argument {other}")),
         }
@@ -177,15 +184,92 @@ fn rss_mib() -> f64 {
         .map_or(0.0, |kib| kib / 1024.0)
 }
 
+/// The bench's token (its SHA-256 is in the service's configuration).
+const TOKEN: &str = "fleet-bench-token";
+
+type Client = UavNavClient<
+    tonic::service::interceptor::InterceptedService<
+        tonic::transport::Channel,
+        Box<dyn FnMut(tonic::Request<()>) -> Result<tonic::Request<()>, tonic::Status> + Send>,
+    >,
+>;
+
+/// Where the clients connect: plaintext, or TLS trusting `ca` with the bench's token.
+#[derive(Clone)]
+struct Target {
+    addr: std::net::SocketAddr,
+    ca: Option<Vec<u8>>,
+}
+
+async fn connect(t: &Target) -> Client {
+    let (scheme, tls) = match &t.ca {
+        Some(ca) => (
+            "https",
+            Some(
+                tonic::transport::ClientTlsConfig::new()
+                    .ca_certificate(tonic::transport::Certificate::from_pem(ca))
+                    .domain_name("localhost"),
+            ),
+        ),
+        None => ("http", None),
+    };
+    let mut ep = tonic::transport::Endpoint::from_shared(format!(
+        "{scheme}://localhost:{}",
+        t.addr.port()
+    ))
+    .expect("endpoint");
+    if let Some(tls) = tls {
+        ep = ep.tls_config(tls).expect("tls");
+    }
+    let channel = ep.connect().await.expect("connect");
+    let token: Option<tonic::metadata::MetadataValue<tonic::metadata::Ascii>> =
+        t.ca.as_ref().map(|_| format!("Bearer {TOKEN}").parse().expect("token"));
+    let f: Box<dyn FnMut(tonic::Request<()>) -> Result<tonic::Request<()>, tonic::Status> + Send> =
+        Box::new(move |mut r: tonic::Request<()>| {
+            if let Some(v) = &token {
+                r.metadata_mut().insert("authorization", v.clone());
+            }
+            Ok(r)
+        });
+    UavNavClient::with_interceptor(channel, f).max_encoding_message_size(16 << 20)
+}
+
 async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleConfig) -> Row {
     let mut cfg = Config::default();
     cfg.grpc.addr = "127.0.0.1:0".parse().expect("addr");
     cfg.http.addr = "127.0.0.1:0".parse().expect("addr");
     cfg.zenoh.enabled = false;
     cfg.vehicles.max_vehicles = n + 16;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ca = if args.tls {
+        let pki = uavnav_tests::pki::Pki::new(dir.path(), "bench");
+        let svc = pki.service("uavnavd");
+        cfg.security.tls = Some(uavnavd::security::TlsConfig {
+            certificate: svc.cert,
+            private_key: svc.key,
+            client_ca: None,
+            require_client_certificate: false,
+            reload_s: 10.0,
+        });
+        cfg.security.principals = vec![uavnavd::security::PrincipalConfig {
+            name: "bench".into(),
+            certificate_names: vec![],
+            token_sha256: vec![uavnavd::security::auth::token_digest_hex(TOKEN)],
+            grants: vec![uavnavd::security::Grant {
+                vehicles: "v".into(),
+                verbs: vec![uavnavd::security::Verb::Feed, uavnavd::security::Verb::Configure],
+            }],
+        }];
+        Some(std::fs::read(&pki.ca).expect("CA"))
+    } else {
+        None
+    };
     let server = Server::start(cfg).await.expect("server starts");
-    let url = format!("http://{}", server.grpc_addr);
-    let mut c = UavNavClient::connect(url.clone()).await.expect("connect");
+    let target = Target {
+        addr: server.grpc_addr,
+        ca,
+    };
+    let mut c = connect(&target).await;
     for v in 0..n {
         c.configure_vehicle(pb::ConfigureVehicleRequest {
             vehicle_id: format!("v{v}"),
@@ -241,7 +325,7 @@ async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleCo
             .step_by(args.clients)
             .map(|v| format!("v{v}"))
             .collect();
-        let (items, url) = (Arc::clone(&items), url.clone());
+        let (items, target) = (Arc::clone(&items), target.clone());
         let (imu_sent, frames_sent, not_accepted, envelopes, lag) = (
             imu_sent.clone(),
             frames_sent.clone(),
@@ -250,10 +334,7 @@ async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleCo
             lag.clone(),
         );
         tasks.push(tokio::spawn(async move {
-            let mut client = UavNavClient::connect(url)
-                .await
-                .expect("connect")
-                .max_encoding_message_size(16 << 20);
+            let mut client = connect(&target).await;
             let (tx, rx) = mpsc::channel::<pb::SensorEnvelope>(4096);
             let mut acks = client
                 .ingest(tokio_stream::wrappers::ReceiverStream::new(rx))
@@ -373,15 +454,16 @@ fn main() {
         .build()
         .expect("runtime");
     println!(
-        "| vehicles | camera | s | envelopes/s | IMU sent | poses | frames sent | refused | shed | send lag p99 ms | latency p50 / p99 / max ms | RSS start → end MiB | sustained |"
+        "| vehicles | camera | TLS + auth | s | envelopes/s | IMU sent | poses | frames sent | refused | shed | send lag p99 ms | latency p50 / p99 / max ms | RSS start → end MiB | sustained |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for &n in &args.vehicles {
         let r = rt.block_on(run(n, &args, Arc::clone(&items), config));
         println!(
-            "| {} | {} | {:.1} | {:.0} | {} | {} | {} | {} | {} | {:.1} | {:.1} / {:.1} / {:.1} | {:.0} → {:.0} | {} |",
+            "| {} | {} | {} | {:.1} | {:.0} | {} | {} | {} | {} | {} | {:.1} | {:.1} / {:.1} / {:.1} | {:.0} → {:.0} | {} |",
             r.vehicles,
             if args.camera { "10 Hz" } else { "no" },
+            if args.tls { "yes" } else { "no" },
             r.seconds,
             r.envelopes_per_s,
             r.imu_sent,

@@ -18,10 +18,12 @@ fn env(pairs: &[(&str, &str)]) -> impl Fn(&str) -> Option<String> + use<> {
 #[test]
 fn defaults_match_the_issue() {
     let c = Config::load(["uavnavd"], env(&[])).unwrap();
-    assert_eq!(c.grpc.addr.to_string(), "0.0.0.0:50051");
-    assert_eq!(c.http.addr.to_string(), "0.0.0.0:9464");
+    // Loopback only, in clear (issue 20: plaintext is for loopback unless --insecure).
+    assert_eq!(c.grpc.addr.to_string(), "127.0.0.1:50051");
+    assert_eq!(c.http.addr.to_string(), "127.0.0.1:9464");
     assert_eq!(c.zenoh.mode, ZenohMode::Peer);
-    assert_eq!(c.zenoh.listen, vec!["tcp/[::]:7447".to_string()]);
+    assert_eq!(c.zenoh.listen, vec!["tcp/127.0.0.1:7447".to_string()]);
+    assert!(!c.security.insecure && c.security.tls.is_none() && !c.grpc.reflection);
     assert!(c.zenoh.enabled);
     assert!(c.grpc.max_message_bytes >= 8 << 20);
 }
@@ -31,6 +33,13 @@ fn file_then_env_then_flags() {
     let mut f = tempfile::NamedTempFile::new().unwrap();
     writeln!(f, "[grpc]\naddr = \"127.0.0.1:1000\"\n[http]\naddr = \"127.0.0.1:2000\"\n[zenoh]\nmode = \"client\"\nconnect = [\"tcp/10.0.0.1:7447\"]\n[vehicles]\nidle_evict_s = 5.0").unwrap();
     let path = f.path().to_str().unwrap().to_string();
+    // A plaintext Zenoh link to another host is refused, naming it, unless insecure.
+    let e = Config::load(["uavnavd", "--config", &path], env(&[])).unwrap_err();
+    assert!(e.to_string().contains("zenoh.connect tcp/10.0.0.1:7447"), "{e}");
+    assert!(Config::load(["uavnavd", "--config", &path, "--insecure"], env(&[])).is_ok());
+    let mut f2 = tempfile::NamedTempFile::new().unwrap();
+    writeln!(f2, "[grpc]\naddr = \"127.0.0.1:1000\"\n[http]\naddr = \"127.0.0.1:2000\"\n[zenoh]\nmode = \"client\"\nconnect = [\"tcp/10.0.0.1:7447\"]\n[vehicles]\nidle_evict_s = 5.0\n[security]\ninsecure = true").unwrap();
+    let path = f2.path().to_str().unwrap().to_string();
     // File only.
     let c = Config::load(["uavnavd", "--config", &path], env(&[])).unwrap();
     assert_eq!(c.grpc.addr.port(), 1000);

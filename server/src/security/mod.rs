@@ -250,8 +250,8 @@ pub fn exposure(config: &crate::Config) -> Result<Vec<String>, String> {
             .map(|l| format!("{} {}", l.what, l.addr))
             .collect();
         return Err(format!(
-            "{} would serve without TLS off loopback; configure [security.tls] (and tls/ Zenoh \
-             locators), bind to 127.0.0.1, or accept the risk with security.insecure = true \
+            "{} would carry traffic in clear off loopback; configure [security.tls] (and tls/ \
+             Zenoh locators), use 127.0.0.1, or accept the risk with security.insecure = true \
              (--insecure)",
             names.join(", ")
         ));

@@ -1,0 +1,92 @@
+//! What authorization costs per message, through the service facade (`Service::feed`), in
+//! process: an accepted IMU envelope for the caller's own vehicle against one refused with
+//! PERMISSION_DENIED for another fleet's, with authorization on, and the accepted one with
+//! authorization off. Not a criterion benchmark: it prints a table of ns per message
+//! (`cargo bench -p uavnavd --bench auth_cost`). A refused message must cost less than an
+//! accepted one: it is refused before the vehicle is looked up.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use uavnav_proto::v1 as pb;
+use uavnavd::ingest::Payload;
+use uavnavd::metrics::Transport;
+use uavnavd::security::{Access, Authorizer, Grant, PrincipalConfig, Verb};
+use uavnavd::service::Service;
+
+const N: usize = 200_000;
+
+fn service(principals: &[PrincipalConfig]) -> (Service, tokio::sync::watch::Sender<bool>) {
+    let mut c = uavnavd::Config::default();
+    c.zenoh.enabled = false;
+    let (ingestor, stop) =
+        uavnavd::server::ingest_path(&c, uavnavd::engine::default_factory()).unwrap();
+    (
+        Service::new(ingestor, Arc::new(Authorizer::new(principals).unwrap())),
+        stop,
+    )
+}
+
+/// ns per `feed` of `n` one-sample IMU batches to `id`, sensor time moving on 5 ms a sample.
+async fn per_message(s: &Service, access: &Access, id: &str, n: usize) -> (f64, pb::IngestStatus) {
+    let mut status = pb::IngestStatus::Unspecified;
+    let t0 = Instant::now();
+    for k in 0..n {
+        let batch = pb::ImuBatch {
+            samples: vec![pb::ImuSample {
+                t_ns: 1_000_000_000 + k as i64 * 5_000_000,
+                accel_z_mps2: -9.81,
+                ..Default::default()
+            }],
+        };
+        status = s
+            .feed(access, Transport::Grpc, id, Payload::Imu(&batch))
+            .await
+            .status;
+    }
+    (t0.elapsed().as_nanos() as f64 / n as f64, status)
+}
+
+fn main() {
+    let alpha = PrincipalConfig {
+        name: "gs-alpha".into(),
+        certificate_names: vec!["gs-alpha".into()],
+        token_sha256: vec![],
+        grants: vec![Grant {
+            vehicles: "alpha-".into(),
+            verbs: vec![Verb::Feed, Verb::Watch],
+        }],
+    };
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let (secured, _stop1) = service(std::slice::from_ref(&alpha));
+        let access = secured.authenticate("grpc", &["gs-alpha".into()], None).unwrap();
+        let (open, _stop2) = service(&[]);
+        // Warm up: the vehicles exist, their actors run.
+        let _ = per_message(&secured, &access, "alpha-1", 1_000).await;
+        let _ = per_message(&open, &Access::Open, "alpha-1", 1_000).await;
+        println!("| message | authorization | ns per message | status |");
+        println!("|---|---|---|---|");
+        for (what, svc, acc, id) in [
+            ("IMU for its own vehicle", &open, &Access::Open, "alpha-2"),
+            ("IMU for its own vehicle", &secured, &access, "alpha-2"),
+            ("IMU for another fleet's vehicle", &secured, &access, "bravo-1"),
+        ] {
+            let (ns, status) = per_message(svc, acc, id, N).await;
+            let auth = if matches!(acc, Access::Open) { "off" } else { "on" };
+            println!("| {what} | {auth} | {ns:.0} | {status:?} |");
+        }
+        let t0 = Instant::now();
+        for _ in 0..N {
+            let _ = secured.authenticate("grpc", &["gs-alpha".into()], Some(b"Bearer not-a-token"));
+        }
+        println!(
+            "| (one call's authentication: certificate and a bad token) | on | {:.0} | Unauthenticated |",
+            t0.elapsed().as_nanos() as f64 / N as f64
+        );
+    });
+}
