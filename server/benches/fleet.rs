@@ -213,17 +213,16 @@ async fn connect(t: &Target) -> Client {
         ),
         None => ("http", None),
     };
-    let mut ep = tonic::transport::Endpoint::from_shared(format!(
-        "{scheme}://localhost:{}",
-        t.addr.port()
-    ))
-    .expect("endpoint");
+    let mut ep =
+        tonic::transport::Endpoint::from_shared(format!("{scheme}://localhost:{}", t.addr.port()))
+            .expect("endpoint");
     if let Some(tls) = tls {
         ep = ep.tls_config(tls).expect("tls");
     }
     let channel = ep.connect().await.expect("connect");
     let token: Option<tonic::metadata::MetadataValue<tonic::metadata::Ascii>> =
-        t.ca.as_ref().map(|_| format!("Bearer {TOKEN}").parse().expect("token"));
+        t.ca.as_ref()
+            .map(|_| format!("Bearer {TOKEN}").parse().expect("token"));
     let f: Box<dyn FnMut(tonic::Request<()>) -> Result<tonic::Request<()>, tonic::Status> + Send> =
         Box::new(move |mut r: tonic::Request<()>| {
             if let Some(v) = &token {
@@ -257,7 +256,10 @@ async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleCo
             token_sha256: vec![uavnavd::security::auth::token_digest_hex(TOKEN)],
             grants: vec![uavnavd::security::Grant {
                 vehicles: "v".into(),
-                verbs: vec![uavnavd::security::Verb::Feed, uavnavd::security::Verb::Configure],
+                verbs: vec![
+                    uavnavd::security::Verb::Feed,
+                    uavnavd::security::Verb::Configure,
+                ],
             }],
         }];
         Some(std::fs::read(&pki.ca).expect("CA"))

@@ -248,6 +248,12 @@ impl VehicleHandle {
     pub fn is_closed(&self) -> bool {
         self.tx.is_closed()
     }
+
+    /// Asks the actor to stop without waiting (admission eviction of an idle vehicle: its queue
+    /// is empty). Whether the request was queued.
+    pub fn try_stop(&self) -> bool {
+        self.tx.try_send(Msg::Stop).is_ok()
+    }
 }
 
 /// Starts a vehicle actor. `on_exit` runs when the task ends (eviction or shutdown).

@@ -44,7 +44,13 @@ impl UavNavService {
     }
 
     fn stopping(&self) -> watch::Receiver<bool> {
-        self.service.ingestor().registry().ctx().hub.stopping.clone()
+        self.service
+            .ingestor()
+            .registry()
+            .ctx()
+            .hub
+            .stopping
+            .clone()
     }
 
     /// Who is calling: the verified client certificate of the connection (TLS) and the
@@ -147,7 +153,11 @@ pub async fn remap_transport_status<B>(
 
 async fn ack_envelope(service: &Service, access: &Access, e: pb::SensorEnvelope) -> pb::IngestAck {
     let verdict = match e.payload.as_ref().map(Payload::from) {
-        Some(p) => service.feed(access, Transport::Grpc, &e.vehicle_id, p).await,
+        Some(p) => {
+            service
+                .feed(access, Transport::Grpc, &e.vehicle_id, p)
+                .await
+        }
         None => {
             let metrics = service.metrics();
             metrics.input(Transport::Grpc, Kind::Malformed, Outcome::Invalid, 1);
@@ -389,7 +399,14 @@ impl UavNav for UavNavService {
         self.service
             .authorize_watch(&access, &sel.ids, &sel.prefix, sel.all)
             .map_err(|e| e.to_status())?;
-        let rx = self.service.ingestor().registry().ctx().hub.poses.subscribe();
+        let rx = self
+            .service
+            .ingestor()
+            .registry()
+            .ctx()
+            .hub
+            .poses
+            .subscribe();
         Ok(Response::new(self.watch(rx, sel)))
     }
 
@@ -402,7 +419,14 @@ impl UavNav for UavNavService {
         self.service
             .authorize_watch(&access, &sel.ids, &sel.prefix, sel.all)
             .map_err(|e| e.to_status())?;
-        let rx = self.service.ingestor().registry().ctx().hub.health.subscribe();
+        let rx = self
+            .service
+            .ingestor()
+            .registry()
+            .ctx()
+            .hub
+            .health
+            .subscribe();
         Ok(Response::new(self.watch(rx, sel)))
     }
 

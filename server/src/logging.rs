@@ -23,7 +23,9 @@ pub fn directives(filter: &str) -> String {
 
 /// Installs the global subscriber (a second call is a no-op).
 pub fn init(cfg: &LogConfig) {
-    let from_env = std::env::var("RUST_LOG").ok().filter(|v| !v.trim().is_empty());
+    let from_env = std::env::var("RUST_LOG")
+        .ok()
+        .filter(|v| !v.trim().is_empty());
     let filter = EnvFilter::try_new(directives(from_env.as_deref().unwrap_or(&cfg.filter)))
         .unwrap_or_else(|_| EnvFilter::new(directives(&cfg.filter)));
     let builder = tracing_subscriber::fmt()

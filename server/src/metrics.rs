@@ -237,6 +237,8 @@ pub struct Metrics {
     pub vehicles: Gauge,
     /// Actors evicted for idleness.
     pub evictions: Counter,
+    /// Idle unconfigured vehicles displaced by a new vehicle at the vehicle limit.
+    pub admission_evictions: Counter,
     /// Ingest-to-pose latency, s.
     pub latency: Histogram,
     /// Vision jobs completed.
@@ -419,6 +421,12 @@ impl Metrics {
             foxglove_dropped.clone(),
         );
         let security = crate::security::SecurityMetrics::register(&mut registry);
+        let admission_evictions = Counter::default();
+        registry.register(
+            "admission_evictions",
+            "Idle unconfigured vehicles displaced by a new vehicle at the vehicle limit",
+            admission_evictions.clone(),
+        );
         Self {
             registry: Arc::new(registry),
             inputs,
@@ -447,6 +455,7 @@ impl Metrics {
             frames_rejected,
             divergence_resets,
             security,
+            admission_evictions,
         }
     }
 

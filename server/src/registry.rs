@@ -2,6 +2,12 @@
 //! vehicle's estimator lives inside its own actor task, never behind a lock.
 //!
 //! Actors are created on first data or by configuration, and remove themselves when evicted.
+//!
+//! Admission: when `max_vehicles` are live, a new vehicle takes the place of the least recently
+//! active *unconfigured* vehicle that has been silent for [`ADMISSION_IDLE_NS`] (counted in
+//! `uavnav_admission_evictions_total`), so a flood of junk ids (each a vehicle nobody configured)
+//! cannot lock real vehicles out for `idle_evict_s`. Configured vehicles and vehicles still
+//! streaming are never displaced; only then is a new vehicle refused.
 
 use std::collections::HashMap;
 use std::sync::{Arc, RwLock, Weak};
@@ -10,6 +16,10 @@ use uavnav_core::VehicleConfig;
 
 use crate::actor::{self, Ctx, VehicleHandle};
 use crate::vehicle::VehicleShared;
+
+/// How long an unconfigured vehicle must have been silent before a new vehicle may take its place
+/// at the vehicle limit, ns.
+pub const ADMISSION_IDLE_NS: i64 = 1_000_000_000;
 
 /// Why a vehicle could not be had.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -20,6 +30,18 @@ pub enum RegistryError {
     /// The service is shutting down.
     #[error("the service is shutting down")]
     Stopping,
+}
+
+/// The least recently active unconfigured vehicle silent for [`ADMISSION_IDLE_NS`], if any
+/// (one pass over the map, only at the limit).
+fn admission_victim(map: &HashMap<Arc<str>, VehicleHandle>, now_ns: i64) -> Option<Arc<str>> {
+    use std::sync::atomic::Ordering::Relaxed;
+    map.iter()
+        .filter(|(_, h)| !h.shared.configured.load(Relaxed))
+        .map(|(id, h)| (h.shared.last_input_wall_ns.load(Relaxed), id))
+        .filter(|(last, _)| now_ns - last >= ADMISSION_IDLE_NS)
+        .min_by_key(|(last, _)| *last)
+        .map(|(_, id)| Arc::clone(id))
 }
 
 /// The vehicle registry.
@@ -69,7 +91,14 @@ impl Registry {
         map.retain(|_, h| !h.is_closed());
         let limit = self.ctx.vehicles.max_vehicles;
         if map.len() >= limit {
-            return Err(RegistryError::Full(limit));
+            let victim = admission_victim(&map, crate::vehicle::wall_ns())
+                .ok_or(RegistryError::Full(limit))?;
+            if let Some(h) = map.remove(&victim) {
+                h.try_stop();
+                self.ctx.metrics.admission_evictions.inc();
+                tracing::debug!(vehicle = ?victim, "idle unconfigured vehicle displaced at the vehicle limit");
+                // Its actor's exit hook announces it gone (lifecycle) when it stops.
+            }
         }
         let key: Arc<str> = Arc::from(id);
         let shared = Arc::new(VehicleShared::new(Arc::clone(&key)));

@@ -76,15 +76,19 @@ impl Server {
         for w in exposure(&config).map_err(|e| anyhow!(e))? {
             warn!("{w}");
         }
-        let auth = Arc::new(
-            Authorizer::new(&config.security.principals).map_err(|e| anyhow!(e))?,
-        );
+        let auth = Arc::new(Authorizer::new(&config.security.principals).map_err(|e| anyhow!(e))?);
         let certs = match &config.security.tls {
             Some(t) => {
                 let store = CertStore::load(t)?;
                 store.spawn_reloader(
                     stop_tx.subscribe(),
-                    ingestor.registry().ctx().metrics.security.tls_reload_failures.clone(),
+                    ingestor
+                        .registry()
+                        .ctx()
+                        .metrics
+                        .security
+                        .tls_reload_failures
+                        .clone(),
                 );
                 Some(store)
             }
@@ -118,16 +122,29 @@ impl Server {
 
         let service = Service::new(ingestor, auth);
         let zenoh = if config.zenoh.enabled {
-            Some(ZenohIo::start(&config.zenoh, &config.security, service.clone(), hub.clone()).await?)
+            Some(
+                ZenohIo::start(
+                    &config.zenoh,
+                    &config.security,
+                    service.clone(),
+                    hub.clone(),
+                )
+                .await?,
+            )
         } else {
             None
         };
         let (health, health_service) = tonic_health::server::health_reporter();
         health.set_serving::<UavNavServer<UavNavService>>().await;
         let stop = stop_tx.subscribe();
-        let (grpc_addr, grpc) =
-            serve_grpc(&config, service.clone(), health_service, certs.clone(), stop.clone())
-                .await?;
+        let (grpc_addr, grpc) = serve_grpc(
+            &config,
+            service.clone(),
+            health_service,
+            certs.clone(),
+            stop.clone(),
+        )
+        .await?;
         let ready = Arc::new(AtomicBool::new(true));
         let (http_addr, http) = serve_http(
             config.http.addr,
@@ -274,8 +291,8 @@ async fn serve_grpc(
     let task = match certs {
         Some(store) => {
             let conns = tls::accept(listener, store, Alpn::Grpc, tls_failures, stop);
-            let incoming = tokio_stream::wrappers::ReceiverStream::new(conns)
-                .map(Ok::<_, std::io::Error>);
+            let incoming =
+                tokio_stream::wrappers::ReceiverStream::new(conns).map(Ok::<_, std::io::Error>);
             tokio::spawn(async move {
                 if let Err(e) = router
                     .serve_with_incoming_shutdown(incoming, shutdown)

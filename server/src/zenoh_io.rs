@@ -27,9 +27,9 @@ use zenoh::liveliness::LivelinessToken;
 use crate::config::ZenohConfig;
 use crate::hub::{Hub, PoseBatch};
 use crate::ingest::{Ingestor, Payload};
+use crate::metrics::{Kind, Outcome, Transport};
 use crate::security::{Access, SecurityConfig};
 use crate::service::Service;
-use crate::metrics::{Kind, Outcome, Transport};
 use crate::vehicle::VehicleStats;
 
 /// The metric kind of an input leaf (`None` for the outputs, which the input subscription also

@@ -35,7 +35,10 @@ fn file_then_env_then_flags() {
     let path = f.path().to_str().unwrap().to_string();
     // A plaintext Zenoh link to another host is refused, naming it, unless insecure.
     let e = Config::load(["uavnavd", "--config", &path], env(&[])).unwrap_err();
-    assert!(e.to_string().contains("zenoh.connect tcp/10.0.0.1:7447"), "{e}");
+    assert!(
+        e.to_string().contains("zenoh.connect tcp/10.0.0.1:7447"),
+        "{e}"
+    );
     assert!(Config::load(["uavnavd", "--config", &path, "--insecure"], env(&[])).is_ok());
     let mut f2 = tempfile::NamedTempFile::new().unwrap();
     writeln!(f2, "[grpc]\naddr = \"127.0.0.1:1000\"\n[http]\naddr = \"127.0.0.1:2000\"\n[zenoh]\nmode = \"client\"\nconnect = [\"tcp/10.0.0.1:7447\"]\n[vehicles]\nidle_evict_s = 5.0\n[security]\ninsecure = true").unwrap();

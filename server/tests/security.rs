@@ -139,7 +139,12 @@ fn status_of(ack: &pb::IngestAck) -> pb::IngestStatus {
     pb::IngestStatus::try_from(ack.status).unwrap()
 }
 
-fn refused(server: &uavnavd::RunningServer, principal: &str, reason: &'static str, verb: Option<Verb>) -> u64 {
+fn refused(
+    server: &uavnavd::RunningServer,
+    principal: &str,
+    reason: &'static str,
+    verb: Option<Verb>,
+) -> u64 {
     server
         .metrics()
         .security
@@ -218,7 +223,10 @@ async fn strangers_are_refused_before_anything_is_read() {
     .await
     .unwrap_err();
     assert_eq!(e.code(), tonic::Code::Unauthenticated, "{e:?}");
-    assert!(s.server.registry().get("bravo-1").is_none(), "nothing was created");
+    assert!(
+        s.server.registry().get("bravo-1").is_none(),
+        "nothing was created"
+    );
     assert_eq!(refused(&s.server, "anonymous", "no_credentials", None), 1);
     assert_eq!(refused(&s.server, "anonymous", "bad_token", None), 2);
     s.server.shutdown().await.unwrap();
@@ -234,7 +242,9 @@ async fn fleets_only_reach_their_own_vehicles() {
     let alpha_pem = s.pki.client("gs-alpha");
     // alpha by certificate, bravo by token over TLS without a certificate.
     let mut alpha = with_token(
-        tls_channel(&s.server, &s.pki.ca, Some(&alpha_pem)).await.unwrap(),
+        tls_channel(&s.server, &s.pki.ca, Some(&alpha_pem))
+            .await
+            .unwrap(),
         None,
     );
     let mut bravo = with_token(
@@ -243,9 +253,12 @@ async fn fleets_only_reach_their_own_vehicles() {
     );
 
     // Positive controls: each feeds and configures its own vehicle.
-    let ok = feed_one(&mut alpha, wire::imu_env("alpha-1", 0, vec![wire::imu(1_000_000_000)]))
-        .await
-        .unwrap();
+    let ok = feed_one(
+        &mut alpha,
+        wire::imu_env("alpha-1", 0, vec![wire::imu(1_000_000_000)]),
+    )
+    .await
+    .unwrap();
     assert_eq!(status_of(&ok), pb::IngestStatus::Accepted, "{ok:?}");
     let created = bravo
         .configure_vehicle(pb::ConfigureVehicleRequest {
@@ -263,7 +276,11 @@ async fn fleets_only_reach_their_own_vehicles() {
         wire::config_env("bravo-3", 3, false),
     ] {
         let ack = feed_one(&mut alpha, e).await.unwrap();
-        assert_eq!(status_of(&ack), pb::IngestStatus::PermissionDenied, "{ack:?}");
+        assert_eq!(
+            status_of(&ack),
+            pb::IngestStatus::PermissionDenied,
+            "{ack:?}"
+        );
         assert!(ack.reason.contains("gs-alpha"), "{}", ack.reason);
     }
     assert!(s.server.registry().get("bravo-2").is_none());
@@ -351,7 +368,11 @@ async fn fleets_only_reach_their_own_vehicles() {
     // Counted by principal, reason and verb.
     let m = |verb| refused(&s.server, "gs-alpha", "permission_denied", Some(verb));
     assert_eq!(m(Verb::Feed), 2);
-    assert_eq!(m(Verb::Configure), 2, "the stream's config and ConfigureVehicle");
+    assert_eq!(
+        m(Verb::Configure),
+        2,
+        "the stream's config and ConfigureVehicle"
+    );
     assert_eq!(m(Verb::Reset), 1);
     assert_eq!(m(Verb::Watch), 7, "GetPose and six watches");
     s.server.shutdown().await.unwrap();
@@ -375,7 +396,9 @@ async fn https_get(
         .with_root_certificates(roots)
         .with_no_client_auth();
     let connector = tokio_rustls::TlsConnector::from(Arc::new(config));
-    let tcp = tokio::net::TcpStream::connect(server.http_addr).await.unwrap();
+    let tcp = tokio::net::TcpStream::connect(server.http_addr)
+        .await
+        .unwrap();
     let name = rustls_pki_types::ServerName::try_from("localhost").unwrap();
     let mut tls = connector.connect(name, tcp).await.unwrap();
     let auth = token
@@ -409,11 +432,18 @@ async fn http_is_tls_and_metrics_need_a_grant() {
         "{ops}"
     );
     // Plain HTTP to the TLS port gets nothing.
-    let mut tcp = tokio::net::TcpStream::connect(s.server.http_addr).await.unwrap();
-    tcp.write_all(b"GET /livez HTTP/1.1\r\nHost: x\r\n\r\n").await.unwrap();
+    let mut tcp = tokio::net::TcpStream::connect(s.server.http_addr)
+        .await
+        .unwrap();
+    tcp.write_all(b"GET /livez HTTP/1.1\r\nHost: x\r\n\r\n")
+        .await
+        .unwrap();
     let mut buf = Vec::new();
     let _ = tokio::time::timeout(Duration::from_secs(3), tcp.read_to_end(&mut buf)).await;
-    assert!(!String::from_utf8_lossy(&buf).contains("ok"), "no plaintext answer");
+    assert!(
+        !String::from_utf8_lossy(&buf).contains("ok"),
+        "no plaintext answer"
+    );
     s.server.shutdown().await.unwrap();
 }
 
@@ -421,7 +451,9 @@ async fn http_is_tls_and_metrics_need_a_grant() {
 async fn certificates_are_reloaded_without_a_restart() {
     let s = secure_server().await;
     let alpha_pem = s.pki.client("gs-alpha");
-    let ch = tls_channel(&s.server, &s.pki.ca, Some(&alpha_pem)).await.unwrap();
+    let ch = tls_channel(&s.server, &s.pki.ca, Some(&alpha_pem))
+        .await
+        .unwrap();
     with_token(ch, None)
         .list_vehicles(pb::ListVehiclesRequest::default())
         .await
@@ -460,7 +492,9 @@ async fn certificates_are_reloaded_without_a_restart() {
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
     assert!(switched, "the new service certificate is in use within 5 s");
-    let ch = tls_channel(&s.server, &pki2.ca, Some(&alpha_pem)).await.unwrap();
+    let ch = tls_channel(&s.server, &pki2.ca, Some(&alpha_pem))
+        .await
+        .unwrap();
     with_token(ch, None)
         .list_vehicles(pb::ListVehiclesRequest::default())
         .await

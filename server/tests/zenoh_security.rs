@@ -137,8 +137,22 @@ async fn zenoh_grants_follow_the_certificate() {
     };
     // Positive control: each fleet feeds its own vehicle.
     for (s, id) in [(&alpha, "alpha-1"), (&bravo, "bravo-1")] {
-        put(s, id, Leaf::Config, vehicle_config(false).encode_to_vec(), "uavnav.v1.VehicleConfig").await;
-        put(s, id, Leaf::Gnss, fix(1_000).encode_to_vec(), "uavnav.v1.GnssFix").await;
+        put(
+            s,
+            id,
+            Leaf::Config,
+            vehicle_config(false).encode_to_vec(),
+            "uavnav.v1.VehicleConfig",
+        )
+        .await;
+        put(
+            s,
+            id,
+            Leaf::Gnss,
+            fix(1_000).encode_to_vec(),
+            "uavnav.v1.GnssFix",
+        )
+        .await;
         for k in 0..20 {
             let b = pb::ImuBatch {
                 samples: vec![imu(2_000 + k * 5_000_000)],
@@ -147,16 +161,44 @@ async fn zenoh_grants_follow_the_certificate() {
         }
     }
     // alpha on bravo's keys: a new vehicle and an existing one.
-    put(&alpha, "bravo-2", Leaf::Config, vehicle_config(false).encode_to_vec(), "uavnav.v1.VehicleConfig").await;
-    put(&alpha, "bravo-2", Leaf::Gnss, fix(1_000).encode_to_vec(), "uavnav.v1.GnssFix").await;
+    put(
+        &alpha,
+        "bravo-2",
+        Leaf::Config,
+        vehicle_config(false).encode_to_vec(),
+        "uavnav.v1.VehicleConfig",
+    )
+    .await;
+    put(
+        &alpha,
+        "bravo-2",
+        Leaf::Gnss,
+        fix(1_000).encode_to_vec(),
+        "uavnav.v1.GnssFix",
+    )
+    .await;
     // Forged outputs from a ground-station certificate: a pose on bravo-1's key, a service token.
     let forged = pb::PoseEstimate {
         vehicle_id: "bravo-1".into(),
         t_ns: 123,
         ..Default::default()
     };
-    put(&alpha, "bravo-1", Leaf::Pose, forged.encode_to_vec(), "uavnav.v1.PoseEstimate").await;
-    put(&bravo, "bravo-1", Leaf::Pose, forged.encode_to_vec(), "uavnav.v1.PoseEstimate").await;
+    put(
+        &alpha,
+        "bravo-1",
+        Leaf::Pose,
+        forged.encode_to_vec(),
+        "uavnav.v1.PoseEstimate",
+    )
+    .await;
+    put(
+        &bravo,
+        "bravo-1",
+        Leaf::Pose,
+        forged.encode_to_vec(),
+        "uavnav.v1.PoseEstimate",
+    )
+    .await;
     let _fake = alpha
         .liveliness()
         .declare_token(keys::service_key("impostor"))
@@ -166,8 +208,11 @@ async fn zenoh_grants_follow_the_certificate() {
     let reg = server.registry().clone();
     assert!(
         eventually(Duration::from_secs(10), || {
-            reg.get("alpha-1").is_some_and(|h| h.shared.pose().is_some())
-                && reg.get("bravo-1").is_some_and(|h| h.shared.pose().is_some())
+            reg.get("alpha-1")
+                .is_some_and(|h| h.shared.pose().is_some())
+                && reg
+                    .get("bravo-1")
+                    .is_some_and(|h| h.shared.pose().is_some())
         })
         .await,
         "both fleets' own vehicles are fed over Zenoh"
@@ -191,7 +236,10 @@ async fn zenoh_grants_follow_the_certificate() {
                 && (key.ends_with("/pose") || key.ends_with("/health")),
             "a wildcard subscription got {key}"
         );
-        assert!(!key.contains("alpha-"), "bravo's wildcard got alpha's {key}");
+        assert!(
+            !key.contains("alpha-"),
+            "bravo's wildcard got alpha's {key}"
+        );
         wide += 1;
     }
     assert!(wide > 0, "the wildcard got bravo's own outputs");
@@ -201,7 +249,10 @@ async fn zenoh_grants_follow_the_certificate() {
             "a fake service token reached a watcher"
         );
     }
-    assert!(reg.get("bravo-2").is_none(), "alpha's puts on bravo's keys never create a vehicle");
+    assert!(
+        reg.get("bravo-2").is_none(),
+        "alpha's puts on bravo's keys never create a vehicle"
+    );
     let bravo1 = reg.get("bravo-1").unwrap();
     assert_eq!(
         bravo1.shared.stats.accepted(),
@@ -216,7 +267,10 @@ async fn zenoh_grants_follow_the_certificate() {
     while let Ok(Ok(r)) = tokio::time::timeout_at(deadline, admin.recv_async()).await {
         if let Ok(sample) = r.result() {
             let key = sample.key_expr().as_str();
-            assert!(key.starts_with(&own), "the service's admin space answered: {key}");
+            assert!(
+                key.starts_with(&own),
+                "the service's admin space answered: {key}"
+            );
         }
     }
     drop((alpha, bravo, watcher));

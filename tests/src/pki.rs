@@ -58,7 +58,14 @@ impl Pki {
         }
     }
 
-    fn issue(&self, file: &str, cn: &str, sans: &[&str], eku: &[ExtendedKeyUsagePurpose], expired: bool) -> Pem {
+    fn issue(
+        &self,
+        file: &str,
+        cn: &str,
+        sans: &[&str],
+        eku: &[ExtendedKeyUsagePurpose],
+        expired: bool,
+    ) -> Pem {
         let key = KeyPair::generate().expect("leaf key");
         let sans: Vec<String> = sans.iter().map(|s| s.to_string()).collect();
         let mut params = CertificateParams::new(sans).expect("leaf params");
@@ -85,14 +92,23 @@ impl Pki {
             name,
             name,
             &[name, "localhost", "127.0.0.1"],
-            &[ExtendedKeyUsagePurpose::ServerAuth, ExtendedKeyUsagePurpose::ClientAuth],
+            &[
+                ExtendedKeyUsagePurpose::ServerAuth,
+                ExtendedKeyUsagePurpose::ClientAuth,
+            ],
             false,
         )
     }
 
     /// A ground station's client certificate: CN and DNS name `name`.
     pub fn client(&self, name: &str) -> Pem {
-        self.issue(name, name, &[name], &[ExtendedKeyUsagePurpose::ClientAuth], false)
+        self.issue(
+            name,
+            name,
+            &[name],
+            &[ExtendedKeyUsagePurpose::ClientAuth],
+            false,
+        )
     }
 
     /// A client certificate that expired in 2021.

@@ -319,9 +319,7 @@ impl Authorizer {
 /// The token of an `authorization: Bearer <token>` value.
 fn bearer(value: &[u8]) -> Result<&[u8], AuthError> {
     let v = value.trim_ascii();
-    let (scheme, rest) = v
-        .split_at_checked(6)
-        .ok_or(AuthError::MalformedToken)?;
+    let (scheme, rest) = v.split_at_checked(6).ok_or(AuthError::MalformedToken)?;
     if !scheme.eq_ignore_ascii_case(b"bearer") {
         return Err(AuthError::MalformedToken);
     }
@@ -352,8 +350,16 @@ mod tests {
             }],
         };
         Authorizer::new(&[
-            p("gs-alpha", "alpha-", vec![Verb::Feed, Verb::Watch, Verb::List]),
-            p("gs-bravo", "bravo-", vec![Verb::Feed, Verb::Configure, Verb::Reset]),
+            p(
+                "gs-alpha",
+                "alpha-",
+                vec![Verb::Feed, Verb::Watch, Verb::List],
+            ),
+            p(
+                "gs-bravo",
+                "bravo-",
+                vec![Verb::Feed, Verb::Configure, Verb::Reset],
+            ),
         ])
         .expect("valid principals")
     }
@@ -412,7 +418,10 @@ mod tests {
             grants: vec![],
         };
         let e = Authorizer::new(&[bad]).expect_err("short digest");
-        assert!(e.to_string().contains("security.principals[0] (\"gs\")"), "{e}");
+        assert!(
+            e.to_string().contains("security.principals[0] (\"gs\")"),
+            "{e}"
+        );
         let wildcard = PrincipalConfig {
             name: "gs".into(),
             certificate_names: vec!["gs".into()],

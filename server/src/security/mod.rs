@@ -265,7 +265,10 @@ pub fn exposure(config: &crate::Config) -> Result<Vec<String>, String> {
             )
         })
         .collect();
-    if config.zenoh.enabled && sec.tls.is_some() && sec.tls.as_ref().is_some_and(|t| t.client_ca.is_none()) {
+    if config.zenoh.enabled
+        && sec.tls.is_some()
+        && sec.tls.as_ref().is_some_and(|t| t.client_ca.is_none())
+    {
         return Err(
             "security.tls.client_ca is required with Zenoh: every Zenoh peer must present a \
              certificate (mutual TLS)"
@@ -295,12 +298,22 @@ mod tests {
         assert!(e.contains("grpc.addr 0.0.0.0:50051"), "{e}");
         c.security.insecure = true;
         let w = exposure(&c).expect("insecure accepted");
-        assert!(w.iter().any(|w| w.starts_with("INSECURE: grpc.addr")), "{w:?}");
-        assert!(w.iter().any(|w| w.contains("authorization is off")), "{w:?}");
+        assert!(
+            w.iter().any(|w| w.starts_with("INSECURE: grpc.addr")),
+            "{w:?}"
+        );
+        assert!(
+            w.iter().any(|w| w.contains("authorization is off")),
+            "{w:?}"
+        );
         c.security.insecure = false;
         c.grpc.addr = "127.0.0.1:50051".parse().expect("addr");
         c.zenoh.listen = vec!["tcp/[::]:7447".into()];
-        assert!(exposure(&c).expect_err("zenoh tcp").contains("zenoh.listen"));
+        assert!(
+            exposure(&c)
+                .expect_err("zenoh tcp")
+                .contains("zenoh.listen")
+        );
         c.zenoh.listen = vec!["tcp/[::1]:7447".into(), "tcp/localhost:7448".into()];
         assert!(exposure(&c).is_ok());
     }

@@ -135,10 +135,14 @@ impl CertStore {
 }
 
 fn stamps(s: &TlsConfig) -> Vec<Option<SystemTime>> {
-    [Some(&s.certificate), Some(&s.private_key), s.client_ca.as_ref()]
-        .into_iter()
-        .map(|p| p.and_then(|p| std::fs::metadata(p).and_then(|m| m.modified()).ok()))
-        .collect()
+    [
+        Some(&s.certificate),
+        Some(&s.private_key),
+        s.client_ca.as_ref(),
+    ]
+    .into_iter()
+    .map(|p| p.and_then(|p| std::fs::metadata(p).and_then(|m| m.modified()).ok()))
+    .collect()
 }
 
 fn file_err(field: &'static str, path: &Path, message: impl ToString) -> TlsError {

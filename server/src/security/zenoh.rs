@@ -34,11 +34,23 @@ pub fn apply(z: &mut zenoh::Config, sec: &SecurityConfig) -> anyhow::Result<()> 
     set("adminspace/enabled", "false".into())?;
     if let Some(tls) = &sec.tls {
         let path = |p: &std::path::Path| json_str(&p.to_string_lossy());
-        set("transport/link/tls/listen_certificate", path(&tls.certificate))?;
-        set("transport/link/tls/listen_private_key", path(&tls.private_key))?;
+        set(
+            "transport/link/tls/listen_certificate",
+            path(&tls.certificate),
+        )?;
+        set(
+            "transport/link/tls/listen_private_key",
+            path(&tls.private_key),
+        )?;
         // The service also connects out (to a router) with the same identity.
-        set("transport/link/tls/connect_certificate", path(&tls.certificate))?;
-        set("transport/link/tls/connect_private_key", path(&tls.private_key))?;
+        set(
+            "transport/link/tls/connect_certificate",
+            path(&tls.certificate),
+        )?;
+        set(
+            "transport/link/tls/connect_private_key",
+            path(&tls.private_key),
+        )?;
         if let Some(ca) = &tls.client_ca {
             set("transport/link/tls/root_ca_certificate", path(ca))?;
             set("transport/link/tls/enable_mtls", "true".into())?;
@@ -59,7 +71,11 @@ pub fn acl_json5(sec: &SecurityConfig) -> String {
     // What every principal receives: the service's declarations (no data).
     rules.push(rule(
         "service-declarations",
-        &["declare_subscriber", "declare_queryable", "liveliness_token"],
+        &[
+            "declare_subscriber",
+            "declare_queryable",
+            "liveliness_token",
+        ],
         "egress",
         &[
             format!("{}/**", keys::VEHICLE_PREFIX),
@@ -109,7 +125,12 @@ pub fn acl_json5(sec: &SecurityConfig) -> String {
                 let outputs = vec![leaf(Leaf::Pose), leaf(Leaf::Health)];
                 let latest = keys::pose_latest_key(&fleet);
                 let alive = keys::alive_key(&fleet);
-                add("watch-in", &["declare_subscriber"], "ingress", outputs.clone());
+                add(
+                    "watch-in",
+                    &["declare_subscriber"],
+                    "ingress",
+                    outputs.clone(),
+                );
                 add("watch-out", &["put"], "egress", outputs);
                 add("latest-in", &["query"], "ingress", vec![latest.clone()]);
                 add("latest-out", &["reply"], "egress", vec![latest]);
@@ -119,12 +140,27 @@ pub fn acl_json5(sec: &SecurityConfig) -> String {
                     "ingress",
                     vec![alive.clone()],
                 );
-                add("alive-out", &["liveliness_token", "reply"], "egress", vec![alive]);
+                add(
+                    "alive-out",
+                    &["liveliness_token", "reply"],
+                    "egress",
+                    vec![alive],
+                );
             }
             // The vehicle list is one reply for every vehicle: only for a grant on all of them.
             if g.verbs.contains(&Verb::List) && g.vehicles.is_empty() {
-                add("list-in", &["query"], "ingress", vec![keys::VEHICLES.into()]);
-                add("list-out", &["reply"], "egress", vec![keys::VEHICLES.into()]);
+                add(
+                    "list-in",
+                    &["query"],
+                    "ingress",
+                    vec![keys::VEHICLES.into()],
+                );
+                add(
+                    "list-out",
+                    &["reply"],
+                    "egress",
+                    vec![keys::VEHICLES.into()],
+                );
             }
         }
         let names: Vec<String> = p.certificate_names.iter().map(|n| json_str(n)).collect();
@@ -215,6 +251,9 @@ mod tests {
         let mut z = zenoh::Config::default();
         apply(&mut z, &sec).expect("zenoh accepts the generated access control");
         let text = format!("{z:?}");
-        assert!(text.contains("alpha-$*"), "the rules are in the session config");
+        assert!(
+            text.contains("alpha-$*"),
+            "the rules are in the session config"
+        );
     }
 }
