@@ -99,6 +99,8 @@ pub enum Cause {
     ImageSize,
     /// The caller has no grant for this vehicle (also in `uavnav_auth_refused_total`).
     PermissionDenied,
+    /// A Zenoh put on a key under `uavnav/v1/vehicle/` that names no input.
+    UnknownKey,
 }
 
 /// Why the recorder dropped a message: the `reason` label of `uavnav_record_dropped_total`.
@@ -144,6 +146,7 @@ lowercase_label!(Cause {
     CorruptImage => "corrupt_image",
     ImageSize => "image_size",
     PermissionDenied => "permission_denied",
+    UnknownKey => "unknown_key",
 });
 lowercase_label!(RecordDrop { QueueFull => "queue_full", Lagged => "lagged", WriteError => "write_error" });
 lowercase_label!(Outcome {

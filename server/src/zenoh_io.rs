@@ -27,7 +27,7 @@ use zenoh::liveliness::LivelinessToken;
 use crate::config::ZenohConfig;
 use crate::hub::{Hub, PoseBatch};
 use crate::ingest::{Ingestor, Payload};
-use crate::metrics::{Kind, Outcome, Transport};
+use crate::metrics::{Cause, Kind, Outcome, Transport};
 use crate::security::{Access, SecurityConfig};
 use crate::service::Service;
 use crate::vehicle::VehicleStats;
@@ -240,6 +240,11 @@ async fn decode_loop(
     let access = Access::Open;
     while let Some(sample) = rx.recv().await {
         let Some((id, leaf)) = keys::split(sample.key_expr().as_str()) else {
+            // A leaf that names nothing (`uavnav/v1/vehicle/x/foo`): refused, counted.
+            let metrics = &ingestor.registry().ctx().metrics;
+            metrics.input(Transport::Zenoh, Kind::Malformed, Outcome::Invalid, 1);
+            metrics.refuse(Transport::Zenoh, Kind::Malformed, Cause::UnknownKey);
+            debug!(key = ?sample.key_expr().as_str(), "zenoh put on an unknown key");
             continue;
         };
         // Our own outputs match `*/*` too (pose, health): not inputs.

@@ -124,6 +124,19 @@ async fn zenoh_round_trip() {
             .encode()
             .contains("transport=\"zenoh\",kind=\"imu\",outcome=\"invalid\"")
     );
+    // A put on a key that names no input is counted, not ignored (issue 19 row 8).
+    z.put("uavnav/v1/vehicle/zv/speed", vec![1u8, 2, 3])
+        .await
+        .unwrap();
+    let m = server.metrics().clone();
+    assert!(
+        eventually(Duration::from_secs(3), || {
+            m.encode()
+                .contains("transport=\"zenoh\",kind=\"malformed\",reason=\"unknown_key\"} 1")
+        })
+        .await,
+        "unknown key counted"
+    );
 
     // Queryables.
     let replies = z.get(keys::pose_latest_key("zv")).await.unwrap();
