@@ -28,12 +28,13 @@ use crate::grpc::{self, RawClient};
 use crate::ingest::{Ingest, IngestStats, Sink, spawn_grpc_driver};
 use crate::keys::Leaf;
 use crate::pb;
+use crate::security::TlsOptions;
 use crate::watch::{Selector, Watch};
 #[cfg(feature = "zenoh")]
 use crate::zenoh_backend;
 
 /// Connection settings.
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct ConnectOptions {
     /// Time allowed to reach the service at connect.
     pub connect_timeout: Duration,
@@ -43,6 +44,29 @@ pub struct ConnectOptions {
     pub backoff: Backoff,
     /// Envelopes buffered in an ingest stream before `send` waits.
     pub ingest_buffer: usize,
+    /// TLS: required by `grpcs://` and Zenoh `tls/` locators, refused on plaintext endpoints.
+    pub tls: Option<TlsOptions>,
+    /// Bearer token sent as `authorization: Bearer <token>` on every gRPC request (Zenoh
+    /// authenticates by certificate and does not send it).
+    pub token: Option<String>,
+    /// Send the token over plaintext `grpc://` to a non-loopback host anyway (refused otherwise:
+    /// anyone on the path could read and replay it).
+    pub allow_insecure_token: bool,
+}
+
+impl std::fmt::Debug for ConnectOptions {
+    // By hand: the token is a secret and must not reach logs.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ConnectOptions")
+            .field("connect_timeout", &self.connect_timeout)
+            .field("request_timeout", &self.request_timeout)
+            .field("backoff", &self.backoff)
+            .field("ingest_buffer", &self.ingest_buffer)
+            .field("tls", &self.tls)
+            .field("token", &self.token.as_ref().map(|_| "<redacted>"))
+            .field("allow_insecure_token", &self.allow_insecure_token)
+            .finish()
+    }
 }
 
 impl Default for ConnectOptions {
@@ -52,6 +76,9 @@ impl Default for ConnectOptions {
             request_timeout: Duration::from_secs(5),
             backoff: Backoff::default(),
             ingest_buffer: 1024,
+            tls: None,
+            token: None,
+            allow_insecure_token: false,
         }
     }
 }
@@ -76,16 +103,12 @@ impl Client {
     /// Connects to `endpoint`; fails if the service is unreachable within the connect timeout.
     pub async fn connect(endpoint: &Endpoint, opts: ConnectOptions) -> Result<Client, ClientError> {
         let backend = match endpoint {
-            Endpoint::Grpc { uri } => {
-                Backend::Grpc(grpc::connect(uri, opts.connect_timeout).await?)
-            }
+            Endpoint::Grpc { uri } => Backend::Grpc(grpc::connect(uri, &opts).await?),
             #[cfg(feature = "zenoh")]
             Endpoint::Zenoh {
                 connect,
                 client_mode,
-            } => Backend::Zenoh(
-                zenoh_backend::open(connect, *client_mode, opts.connect_timeout).await?,
-            ),
+            } => Backend::Zenoh(zenoh_backend::open(connect, *client_mode, &opts).await?),
             #[cfg(not(feature = "zenoh"))]
             Endpoint::Zenoh { .. } => {
                 return Err(ClientError::Unsupported {
