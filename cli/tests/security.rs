@@ -3,6 +3,7 @@
 //! on every request, mutual TLS, refusals as their own errors; Zenoh: `tls/` locators with
 //! mutual TLS); the CLI's security options. Certificates are made at test time by the command
 //! under test, and checked by rustls (webpki) in real handshakes.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod common;
 mod tls_fake;
@@ -81,47 +82,49 @@ fn certs_init_writes_a_deployment_keys_private_and_never_overwrites() {
         assert_eq!(mode(&dir.join(format!("{name}.key"))), 0o600, "{name}.key");
     }
     let ca_before = std::fs::read(dir.join("ca.pem")).unwrap();
-    let again = run(&[
-        "certs",
-        "init",
-        "--dir",
-        dir.to_str().unwrap(),
+    // `uavnav certs SUB --dir DIR ARGS…`: its exit code.
+    let certs = |sub: &str, args: &[&str]| {
+        let mut all = vec!["certs", sub, "--dir", dir.to_str().unwrap()];
+        all.extend_from_slice(args);
+        let out = run(&all);
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, err) = certs("init", &["--service", "uavnavd"]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("refusing to overwrite"), "{err}");
+    assert_eq!(std::fs::read(dir.join("ca.pem")).unwrap(), ca_before);
+    let (code, _) = certs("issue", &["--client", "gs-alpha"]);
+    assert_eq!(code, Some(2), "gs-alpha exists already");
+    let (code, _) = certs("init", &["--service", "a/b"]);
+    assert_eq!(code, Some(2));
+    // --exist-ok (a deployment restarted on its volume): complete = nothing written; a missing
+    // client certificate is issued from the CA already there.
+    let exist_ok = [
         "--service",
         "uavnavd",
-    ]);
-    assert_eq!(again.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&again.stderr).contains("refusing to overwrite"));
-    assert_eq!(std::fs::read(dir.join("ca.pem")).unwrap(), ca_before);
-    let issue = run(&[
-        "certs",
-        "issue",
-        "--dir",
-        dir.to_str().unwrap(),
         "--client",
         "gs-alpha",
-    ]);
-    assert_eq!(issue.status.code(), Some(2), "gs-alpha exists already");
-    let forced = run(&[
-        "certs",
-        "init",
-        "--dir",
-        dir.to_str().unwrap(),
-        "--service",
-        "uavnavd",
-        "--force",
-    ]);
-    assert_eq!(forced.status.code(), Some(0));
+        "--client",
+        "gs-bravo",
+    ];
+    let (code, _) = certs("init", &[&exist_ok[..], &["--exist-ok"]].concat());
+    assert_eq!(code, Some(0));
+    std::fs::remove_file(dir.join("gs-bravo.pem")).unwrap();
+    std::fs::remove_file(dir.join("gs-bravo.key")).unwrap();
+    let alpha = std::fs::read(dir.join("gs-alpha.pem")).unwrap();
+    let (code, _) = certs("init", &[&exist_ok[..], &["--exist-ok"]].concat());
+    assert_eq!(code, Some(0));
+    assert!(dir.join("gs-bravo.pem").exists() && dir.join("gs-bravo.key").exists());
+    assert_eq!(mode(&dir.join("gs-bravo.key")), 0o600);
+    assert_eq!(std::fs::read(dir.join("gs-alpha.pem")).unwrap(), alpha);
+    assert_eq!(std::fs::read(dir.join("ca.pem")).unwrap(), ca_before);
+    let (code, _) = certs("init", &["--service", "uavnavd", "--force"]);
+    assert_eq!(code, Some(0));
     assert_ne!(std::fs::read(dir.join("ca.pem")).unwrap(), ca_before);
     assert_eq!(mode(&dir.join("uavnavd.key")), 0o600);
-    let bad = run(&[
-        "certs",
-        "init",
-        "--dir",
-        dir.to_str().unwrap(),
-        "--service",
-        "a/b",
-    ]);
-    assert_eq!(bad.status.code(), Some(2));
 }
 
 #[test]

@@ -85,7 +85,8 @@ impl Default for ConnectOptions {
 
 #[derive(Debug, Clone)]
 enum Backend {
-    Grpc(RawClient),
+    // Boxed: the intercepted tonic client is some 200 bytes, the other backends a pointer.
+    Grpc(Box<RawClient>),
     #[cfg(feature = "zenoh")]
     Zenoh(zenoh::Session),
     Discard,
@@ -103,7 +104,7 @@ impl Client {
     /// Connects to `endpoint`; fails if the service is unreachable within the connect timeout.
     pub async fn connect(endpoint: &Endpoint, opts: ConnectOptions) -> Result<Client, ClientError> {
         let backend = match endpoint {
-            Endpoint::Grpc { uri } => Backend::Grpc(grpc::connect(uri, &opts).await?),
+            Endpoint::Grpc { uri } => Backend::Grpc(Box::new(grpc::connect(uri, &opts).await?)),
             #[cfg(feature = "zenoh")]
             Endpoint::Zenoh {
                 connect,
@@ -282,7 +283,7 @@ impl Client {
         let backoff = self.opts.backoff.clone();
         match &self.backend {
             Backend::Grpc(c) => {
-                let (c, req) = (c.clone(), sel.to_request());
+                let (c, req) = (RawClient::clone(c), sel.to_request());
                 // Fail now on a refusal (bad selector, service down) rather than inside the task.
                 let first = call(c.clone(), req.clone())
                     .await
@@ -331,8 +332,12 @@ impl Client {
         Ok(match &self.backend {
             Backend::Grpc(c) => {
                 let (tx, rx) = mpsc::channel(self.opts.ingest_buffer.max(1));
-                let task =
-                    spawn_grpc_driver(c.clone(), rx, Arc::clone(&stats), self.opts.backoff.clone());
+                let task = spawn_grpc_driver(
+                    RawClient::clone(c),
+                    rx,
+                    Arc::clone(&stats),
+                    self.opts.backoff.clone(),
+                );
                 Ingest::new(Sink::Grpc(tx), stats, Some(task))
             }
             #[cfg(feature = "zenoh")]

@@ -19,15 +19,19 @@ use uavnav_client::pb::uav_nav_server::{UavNav, UavNavServer};
 
 type BoxStream<T> = Pin<Box<dyn Stream<Item = Result<T, Status>> + Send>>;
 
+/// One request as the service saw it: its `authorization` header and the number of client
+/// certificates presented.
+pub type SeenRequest = (Option<String>, usize);
+
 /// What the service saw of each request.
 #[derive(Debug, Clone, Default)]
 pub struct Seen {
-    /// `(authorization header, client certificates presented)` per request, in order.
-    pub requests: Arc<Mutex<Vec<(Option<String>, usize)>>>,
+    /// Every request, in order.
+    pub requests: Arc<Mutex<Vec<SeenRequest>>>,
 }
 
 impl Seen {
-    pub fn requests(&self) -> Vec<(Option<String>, usize)> {
+    pub fn requests(&self) -> Vec<SeenRequest> {
         self.requests.lock().unwrap().clone()
     }
 }

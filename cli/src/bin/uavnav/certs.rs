@@ -10,7 +10,8 @@
 //! - `token --name NAME`: a fresh bearer token on stdout, the service's config lines (its SHA-256)
 //!   on stderr. `hash-token`: the SHA-256 of a token read from stdin.
 //!
-//! Private keys are written with mode 0600; nothing is overwritten without `--force`. Keys are
+//! Private keys are written with mode 0600; nothing is overwritten without `--force`; `init
+//! --exist-ok` keeps what DIR holds and issues only what is missing (a restarted deployment). Keys are
 //! ECDSA P-256; the CA key never leaves DIR (keep it offline once the deployment is issued).
 //! Certificate handling is in `certs_der` (reading back the CA for `issue`).
 
@@ -93,6 +94,10 @@ struct InitArgs {
     /// A ground station's name: a client certificate NAME.pem/NAME.key (repeatable).
     #[arg(long, value_name = "NAME")]
     client: Vec<String>,
+    /// Keep the files DIR already holds and issue only the missing certificates from its CA
+    /// (exit 0 when nothing is missing): for a deployment started again on the same volume.
+    #[arg(long, conflicts_with = "force")]
+    exist_ok: bool,
     #[command(flatten)]
     validity: Validity,
 }
@@ -166,9 +171,13 @@ fn init(a: &InitArgs) -> CliResult {
             return Err(input(anyhow!("the name '{}' is given twice", l.name)));
         }
     }
-    let mut files = vec![a.dir.join("ca.pem"), a.dir.join("ca.key")];
+    let ca_files = [a.dir.join("ca.pem"), a.dir.join("ca.key")];
+    let mut files = ca_files.to_vec();
     for l in &leaves {
         files.extend(leaf_files(&a.dir, &l.name));
+    }
+    if a.exist_ok {
+        return init_missing(a, &leaves, &ca_files);
     }
     // Every file is checked before any is written: a refusal leaves DIR as it was.
     refuse_existing(&files, a.validity.force)?;
@@ -195,6 +204,52 @@ fn init(a: &InitArgs) -> CliResult {
     );
     for f in &files {
         println!("{}", f.display());
+    }
+    Ok(())
+}
+
+/// `init --exist-ok`: keeps what DIR holds and issues only the missing certificates, from the
+/// existing CA (a deployment restarted on the same volume keeps its identities). Certificates
+/// without their CA are refused: nothing could issue their missing siblings.
+fn init_missing(a: &InitArgs, leaves: &[Leaf], ca_files: &[PathBuf; 2]) -> CliResult {
+    let ca_present = ca_files.iter().filter(|f| f.exists()).count();
+    let missing: Vec<&Leaf> = leaves
+        .iter()
+        .filter(|l| leaf_files(&a.dir, &l.name).iter().any(|f| !f.exists()))
+        .collect();
+    if ca_present == 0 && missing.len() == leaves.len() {
+        // Nothing there yet: a fresh deployment.
+        let fresh = InitArgs {
+            exist_ok: false,
+            dir: a.dir.clone(),
+            service: a.service.clone(),
+            san: a.san.clone(),
+            client: a.client.clone(),
+            validity: a.validity.clone(),
+        };
+        return init(&fresh);
+    }
+    if ca_present < 2 {
+        return Err(input(anyhow!(
+            "{} holds certificates but not both ca.pem and ca.key: cannot complete it",
+            a.dir.display()
+        )));
+    }
+    if missing.is_empty() {
+        eprintln!("uavnav: {} is complete; nothing written", a.dir.display());
+        return Ok(());
+    }
+    let issuer = load_issuer(&a.dir)?;
+    let forced = Validity {
+        force: true,
+        ..a.validity.clone()
+    };
+    for l in missing {
+        // A half-written pair (a key without its certificate) is replaced as a whole.
+        write_leaf(&a.dir, l, &issuer, &forced)?;
+        for f in leaf_files(&a.dir, &l.name) {
+            println!("{}", f.display());
+        }
     }
     Ok(())
 }

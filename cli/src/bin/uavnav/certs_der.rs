@@ -44,7 +44,7 @@ fn base64_decode(s: &str) -> Result<Vec<u8>, String> {
         } as u32)
     };
     let chars: Vec<u8> = s.bytes().filter(|b| !b.is_ascii_whitespace()).collect();
-    if chars.len() % 4 != 0 {
+    if !chars.len().is_multiple_of(4) {
         return Err("truncated base64".into());
     }
     let mut out = Vec::with_capacity(chars.len() / 4 * 3);

@@ -44,18 +44,21 @@ pub fn parse(url: &str) -> Result<Endpoint, CliError> {
 /// Environment variable holding the bearer token (`--token-file` wins).
 pub const TOKEN_ENV: &str = "UAVNAV_TOKEN";
 
+/// The help heading of the security options.
+const SECURITY: &str = "Security (TLS, token)";
+
 /// How an online subcommand secures its connection (flattened into each one's arguments).
 #[derive(Debug, Clone, Default, clap::Args)]
-#[command(next_help_heading = "Security")]
 pub struct SecurityArgs {
     /// PEM file of the CA that signed the service certificate; needed by grpcs://HOST:PORT and by
     /// zenoh/tls/HOST:PORT locators.
-    #[arg(long, env = "UAVNAV_TLS_CA", value_name = "FILE")]
+    #[arg(long, help_heading = SECURITY, env = "UAVNAV_TLS_CA", value_name = "FILE")]
     pub tls_ca: Option<PathBuf>,
     /// PEM file of this ground station's certificate (mutual TLS; with --tls-key). Made by
     /// `uavnav certs init --client NAME`.
     #[arg(
         long,
+        help_heading = SECURITY,
         env = "UAVNAV_TLS_CERT",
         value_name = "FILE",
         requires = "tls_key"
@@ -64,22 +67,23 @@ pub struct SecurityArgs {
     /// PEM file of this ground station's private key (with --tls-cert).
     #[arg(
         long,
+        help_heading = SECURITY,
         env = "UAVNAV_TLS_KEY",
         value_name = "FILE",
         requires = "tls_cert"
     )]
     pub tls_key: Option<PathBuf>,
     /// Name expected in the service certificate (default: the URL's host; gRPC only).
-    #[arg(long, value_name = "NAME", requires = "tls_ca")]
+    #[arg(long, help_heading = SECURITY, value_name = "NAME", requires = "tls_ca")]
     pub tls_domain: Option<String>,
     /// File holding the bearer token sent on every gRPC request (trimmed; made by `uavnav certs
     /// token`). Else the environment variable UAVNAV_TOKEN. There is no option taking the token
     /// itself: a command line is visible to every user in `ps`.
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, help_heading = SECURITY, value_name = "FILE")]
     pub token_file: Option<PathBuf>,
     /// Send the token over plaintext grpc:// to a non-loopback host anyway (refused otherwise:
     /// anyone on the path could read and replay it).
-    #[arg(long)]
+    #[arg(long, help_heading = SECURITY)]
     pub allow_insecure_token: bool,
 }
 

@@ -34,7 +34,8 @@ mod vehicles;
 mod watch;
 
 const EXIT_CODES: &str = "Exit codes: 0 success; 1 run-time failure (I/O, service unreachable); \
-2 bad usage or bad input (one-line reason on stderr); 3 a checked target was missed.";
+2 bad usage or bad input (one-line reason on stderr), including TLS or token settings that cannot \
+be used and credentials or grants the service refuses; 3 a checked target was missed.";
 
 /// uavnav: position and attitude of UAVs from IMU, GNSS and camera.
 #[derive(Debug, Parser)]
