@@ -267,8 +267,10 @@ pub struct LoadOutcome {
     pub vehicles_with_poses: usize,
     /// Vehicles whose newest pose at the end lagged their newest sent sample by more than the latency bound.
     pub vehicles_behind: usize,
-    /// Acks by status (`OK`, `LATE`, …).
+    /// Acks by status (`OK`, `LATE`, `PERMISSION_DENIED`, …).
     pub statuses: BTreeMap<String, u64>,
+    /// Acks `PERMISSION_DENIED` (vehicles outside the caller's grants) by the service's reason.
+    pub permission_denied: BTreeMap<String, u64>,
     /// Transport errors by message.
     pub errors: BTreeMap<String, u64>,
     /// Messages sent but never acknowledged (gRPC).
@@ -320,6 +322,14 @@ impl LoadOutcome {
             out.push(format!(
                 "the service shed {} camera frames (vision overloaded)",
                 self.service.shed
+            ));
+        }
+        // Not a capacity problem but a misconfigured run: say why instead of a bare error rate.
+        let denied: u64 = self.permission_denied.values().sum();
+        if denied > 0 {
+            out.push(format!(
+                "{denied} messages refused with PERMISSION_DENIED (the credentials' grants do not \
+                 cover the vehicle ids; --id-prefix must be inside the fleet)"
             ));
         }
         let rate = self.error_rate();
@@ -492,6 +502,7 @@ pub async fn run(
         bytes: stats.iter().map(|s| s.bytes.load(Ordering::Relaxed)).sum(),
         unacked: 0,
         statuses: BTreeMap::new(),
+        permission_denied: BTreeMap::new(),
         errors: BTreeMap::new(),
         elapsed,
         send_elapsed,
@@ -515,6 +526,9 @@ pub async fn run(
         }
         for (k, v) in s.errors() {
             *outcome.errors.entry(k).or_default() += v;
+        }
+        for (k, v) in s.permission_denied() {
+            *outcome.permission_denied.entry(k).or_default() += v;
         }
         if matches!(client.endpoint(), uavnav_client::Endpoint::Grpc { .. }) {
             outcome.unacked += s

@@ -83,6 +83,9 @@ pub struct Extra {
     pub send_lag_distribution: Vec<LatencyPoint>,
     /// Sent but never acknowledged.
     pub unacked: u64,
+    /// Acks `PERMISSION_DENIED` by the service's reason (also counted in the status codes).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub permission_denied: BTreeMap<String, u64>,
     /// Errors over messages sent.
     pub error_rate: f64,
     /// The service's counters (from health).
@@ -142,6 +145,7 @@ impl Report {
                 vehicles_behind: o.vehicles_behind,
                 send_lag_distribution: percentiles(&o.send_lag_ns),
                 unacked: o.unacked,
+                permission_denied: o.permission_denied.clone(),
                 error_rate: o.error_rate(),
                 service: o.service.clone(),
                 kept_up: failures.is_empty(),
@@ -213,6 +217,9 @@ impl Report {
             x.unacked,
             x.error_rate
         );
+        if !x.permission_denied.is_empty() {
+            let _ = writeln!(s, "  Permission denied: {}", fmt_map(&x.permission_denied));
+        }
         let c = &x.service;
         let _ = writeln!(
             s,

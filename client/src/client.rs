@@ -28,12 +28,13 @@ use crate::grpc::{self, RawClient};
 use crate::ingest::{Ingest, IngestStats, Sink, spawn_grpc_driver};
 use crate::keys::Leaf;
 use crate::pb;
+use crate::security::TlsOptions;
 use crate::watch::{Selector, Watch};
 #[cfg(feature = "zenoh")]
 use crate::zenoh_backend;
 
 /// Connection settings.
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct ConnectOptions {
     /// Time allowed to reach the service at connect.
     pub connect_timeout: Duration,
@@ -43,6 +44,29 @@ pub struct ConnectOptions {
     pub backoff: Backoff,
     /// Envelopes buffered in an ingest stream before `send` waits.
     pub ingest_buffer: usize,
+    /// TLS: required by `grpcs://` and Zenoh `tls/` locators, refused on plaintext endpoints.
+    pub tls: Option<TlsOptions>,
+    /// Bearer token sent as `authorization: Bearer <token>` on every gRPC request (Zenoh
+    /// authenticates by certificate and does not send it).
+    pub token: Option<String>,
+    /// Send the token over plaintext `grpc://` to a non-loopback host anyway (refused otherwise:
+    /// anyone on the path could read and replay it).
+    pub allow_insecure_token: bool,
+}
+
+impl std::fmt::Debug for ConnectOptions {
+    // By hand: the token is a secret and must not reach logs.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ConnectOptions")
+            .field("connect_timeout", &self.connect_timeout)
+            .field("request_timeout", &self.request_timeout)
+            .field("backoff", &self.backoff)
+            .field("ingest_buffer", &self.ingest_buffer)
+            .field("tls", &self.tls)
+            .field("token", &self.token.as_ref().map(|_| "<redacted>"))
+            .field("allow_insecure_token", &self.allow_insecure_token)
+            .finish()
+    }
 }
 
 impl Default for ConnectOptions {
@@ -52,13 +76,17 @@ impl Default for ConnectOptions {
             request_timeout: Duration::from_secs(5),
             backoff: Backoff::default(),
             ingest_buffer: 1024,
+            tls: None,
+            token: None,
+            allow_insecure_token: false,
         }
     }
 }
 
 #[derive(Debug, Clone)]
 enum Backend {
-    Grpc(RawClient),
+    // Boxed: the intercepted tonic client is some 200 bytes, the other backends a pointer.
+    Grpc(Box<RawClient>),
     #[cfg(feature = "zenoh")]
     Zenoh(zenoh::Session),
     Discard,
@@ -76,16 +104,12 @@ impl Client {
     /// Connects to `endpoint`; fails if the service is unreachable within the connect timeout.
     pub async fn connect(endpoint: &Endpoint, opts: ConnectOptions) -> Result<Client, ClientError> {
         let backend = match endpoint {
-            Endpoint::Grpc { uri } => {
-                Backend::Grpc(grpc::connect(uri, opts.connect_timeout).await?)
-            }
+            Endpoint::Grpc { uri } => Backend::Grpc(Box::new(grpc::connect(uri, &opts).await?)),
             #[cfg(feature = "zenoh")]
             Endpoint::Zenoh {
                 connect,
                 client_mode,
-            } => Backend::Zenoh(
-                zenoh_backend::open(connect, *client_mode, opts.connect_timeout).await?,
-            ),
+            } => Backend::Zenoh(zenoh_backend::open(connect, *client_mode, &opts).await?),
             #[cfg(not(feature = "zenoh"))]
             Endpoint::Zenoh { .. } => {
                 return Err(ClientError::Unsupported {
@@ -259,7 +283,7 @@ impl Client {
         let backoff = self.opts.backoff.clone();
         match &self.backend {
             Backend::Grpc(c) => {
-                let (c, req) = (c.clone(), sel.to_request());
+                let (c, req) = (RawClient::clone(c), sel.to_request());
                 // Fail now on a refusal (bad selector, service down) rather than inside the task.
                 let first = call(c.clone(), req.clone())
                     .await
@@ -308,8 +332,12 @@ impl Client {
         Ok(match &self.backend {
             Backend::Grpc(c) => {
                 let (tx, rx) = mpsc::channel(self.opts.ingest_buffer.max(1));
-                let task =
-                    spawn_grpc_driver(c.clone(), rx, Arc::clone(&stats), self.opts.backoff.clone());
+                let task = spawn_grpc_driver(
+                    RawClient::clone(c),
+                    rx,
+                    Arc::clone(&stats),
+                    self.opts.backoff.clone(),
+                );
                 Ingest::new(Sink::Grpc(tx), stats, Some(task))
             }
             #[cfg(feature = "zenoh")]

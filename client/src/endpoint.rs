@@ -3,8 +3,9 @@
 //! | URL | meaning |
 //! |---|---|
 //! | `grpc://HOST:PORT` | gRPC (HTTP/2, plaintext) at HOST:PORT (`http://HOST:PORT` accepted too) |
+//! | `grpcs://HOST:PORT` | gRPC over TLS (`https://HOST:PORT` accepted too); needs [`crate::TlsOptions`] with the service's CA |
 //! | `zenoh` | a Zenoh peer with the default configuration (multicast scouting on the LAN) |
-//! | `zenoh/ENDPOINT[,ENDPOINT…]` | a Zenoh peer connecting to these locators (e.g. `zenoh/tcp/127.0.0.1:7447`), no scouting |
+//! | `zenoh/ENDPOINT[,ENDPOINT…]` | a Zenoh peer connecting to these locators (e.g. `zenoh/tcp/127.0.0.1:7447`, or over TLS `zenoh/tls/uavnavd:7447`), no scouting |
 //! | `zenoh-client/ENDPOINT[,…]` | the same in Zenoh client mode (through a router) |
 //! | `discard` | a built-in sink that encodes and drops everything (load-generator ceiling) |
 
@@ -16,9 +17,9 @@ use crate::error::ClientError;
 /// Where the service is and over which transport.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Endpoint {
-    /// gRPC at an `http://HOST:PORT` URI.
+    /// gRPC at an `http://HOST:PORT` (plaintext) or `https://HOST:PORT` (TLS) URI.
     Grpc {
-        /// The URI given to tonic (`http://HOST:PORT`).
+        /// The URI given to tonic (`http://HOST:PORT` or `https://HOST:PORT`).
         uri: String,
     },
     /// Zenoh.
@@ -39,6 +40,15 @@ impl Endpoint {
             Endpoint::Grpc { .. } => "gRPC",
             Endpoint::Zenoh { .. } => "Zenoh",
             Endpoint::Discard => "discard",
+        }
+    }
+
+    /// Whether the transport is encrypted: `grpcs://`, or Zenoh with at least one `tls/` locator.
+    pub fn uses_tls(&self) -> bool {
+        match self {
+            Endpoint::Grpc { uri } => uri.starts_with("https://"),
+            Endpoint::Zenoh { connect, .. } => connect.iter().any(|c| c.starts_with("tls/")),
+            Endpoint::Discard => false,
         }
     }
 }
@@ -89,10 +99,15 @@ impl FromStr for Endpoint {
                 });
             }
         }
-        let rest = url_t
-            .strip_prefix("grpc://")
-            .or_else(|| url_t.strip_prefix("http://"))
-            .ok_or_else(|| bad("unknown scheme"))?;
+        let (scheme, rest) = [
+            ("http", "grpc://"),
+            ("http", "http://"),
+            ("https", "grpcs://"),
+            ("https", "https://"),
+        ]
+        .into_iter()
+        .find_map(|(scheme, prefix)| url_t.strip_prefix(prefix).map(|r| (scheme, r)))
+        .ok_or_else(|| bad("unknown scheme"))?;
         let rest = rest.trim_end_matches('/');
         let (host, port) = rest.rsplit_once(':').ok_or_else(|| bad("missing :PORT"))?;
         if host.is_empty() {
@@ -101,7 +116,7 @@ impl FromStr for Endpoint {
         port.parse::<u16>()
             .map_err(|_| bad("PORT is not a number in 0-65535"))?;
         Ok(Endpoint::Grpc {
-            uri: format!("http://{rest}"),
+            uri: format!("{scheme}://{rest}"),
         })
     }
 }
@@ -109,7 +124,10 @@ impl FromStr for Endpoint {
 impl fmt::Display for Endpoint {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Endpoint::Grpc { uri } => write!(f, "grpc://{}", uri.trim_start_matches("http://")),
+            Endpoint::Grpc { uri } => match uri.strip_prefix("https://") {
+                Some(rest) => write!(f, "grpcs://{rest}"),
+                None => write!(f, "grpc://{}", uri.trim_start_matches("http://")),
+            },
             Endpoint::Zenoh {
                 connect,
                 client_mode,
@@ -171,11 +189,26 @@ mod tests {
                 client_mode: true
             }
         );
+        assert_eq!(
+            "grpcs://uavnavd:50051".parse::<Endpoint>().unwrap(),
+            Endpoint::Grpc {
+                uri: "https://uavnavd:50051".into()
+            }
+        );
+        assert!("grpcs://uavnavd:1".parse::<Endpoint>().unwrap().uses_tls());
+        assert!(!"grpc://uavnavd:1".parse::<Endpoint>().unwrap().uses_tls());
+        assert!(
+            "zenoh/tls/uavnavd:7447"
+                .parse::<Endpoint>()
+                .unwrap()
+                .uses_tls()
+        );
         assert_eq!("discard".parse::<Endpoint>().unwrap(), Endpoint::Discard);
         for s in [
             "grpc://h",
             "grpc://:1",
             "grpc://h:x",
+            "grpcs://h",
             "ftp://h:1",
             "zenoh/",
             "zenoh/h:1",
@@ -183,7 +216,14 @@ mod tests {
         ] {
             assert!(s.parse::<Endpoint>().is_err(), "{s}");
         }
-        for s in ["grpc://h:1", "zenoh", "zenoh/tcp/a:1", "discard"] {
+        for s in [
+            "grpc://h:1",
+            "grpcs://h:1",
+            "zenoh",
+            "zenoh/tcp/a:1",
+            "zenoh/tls/a:1",
+            "discard",
+        ] {
             assert_eq!(s.parse::<Endpoint>().unwrap().to_string(), s);
         }
     }

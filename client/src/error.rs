@@ -5,7 +5,7 @@
 pub enum ClientError {
     /// The endpoint URL could not be parsed.
     #[error(
-        "bad endpoint '{url}': {reason} (expected grpc://HOST:PORT, zenoh[/ENDPOINT] or discard)"
+        "bad endpoint '{url}': {reason} (expected grpc://HOST:PORT, grpcs://HOST:PORT, zenoh[/ENDPOINT] or discard)"
     )]
     Endpoint {
         /// The URL as given.
@@ -79,6 +79,43 @@ pub enum ClientError {
     /// The stream or client was closed.
     #[error("{0}: closed")]
     Closed(&'static str),
+    /// The TLS settings are unusable (a file missing or not PEM, a certificate without its key,
+    /// TLS options for a plaintext endpoint or a TLS endpoint without them).
+    #[error("TLS: {reason}")]
+    Tls {
+        /// What is wrong.
+        reason: String,
+    },
+    /// The bearer token cannot be sent as given.
+    #[error("token: {reason}")]
+    Token {
+        /// What is wrong.
+        reason: String,
+    },
+    /// A token would cross the network in clear.
+    #[error(
+        "refusing to send a token in clear to {endpoint}: use grpcs:// (TLS), or allow_insecure_token if the network is trusted"
+    )]
+    InsecureToken {
+        /// The plaintext endpoint.
+        endpoint: String,
+    },
+    /// The service does not know who is calling (no, wrong or expired token or certificate).
+    #[error("{op}: not authenticated: {reason}")]
+    Unauthenticated {
+        /// The operation.
+        op: &'static str,
+        /// The service's reason.
+        reason: String,
+    },
+    /// The service knows the caller, whose grants do not cover this operation or vehicle.
+    #[error("{op}: permission denied: {reason}")]
+    PermissionDenied {
+        /// The operation.
+        op: &'static str,
+        /// The service's reason.
+        reason: String,
+    },
     /// Reconnecting gave up after the backoff's attempts.
     #[error("{op}: gave up after {attempts} reconnection attempts; last error: {last}")]
     GaveUp {
@@ -92,13 +129,28 @@ pub enum ClientError {
 }
 
 impl ClientError {
-    /// A gRPC status as an error of operation `op`.
+    /// A gRPC status as an error of operation `op` (the service's refusals get their own
+    /// variants: they are never retried).
     pub fn rpc(op: &'static str, status: tonic::Status) -> Self {
-        ClientError::Rpc {
-            op,
-            code: status.code(),
-            message: status.message().to_string(),
+        let reason = status.message().to_string();
+        match status.code() {
+            tonic::Code::Unauthenticated => ClientError::Unauthenticated { op, reason },
+            tonic::Code::PermissionDenied => ClientError::PermissionDenied { op, reason },
+            code => ClientError::Rpc {
+                op,
+                code,
+                message: reason,
+            },
         }
+    }
+
+    /// Whether the service refused the caller (authentication or authorization): retrying with
+    /// the same credentials gets the same answer.
+    pub fn is_refusal(&self) -> bool {
+        matches!(
+            self,
+            ClientError::Unauthenticated { .. } | ClientError::PermissionDenied { .. }
+        )
     }
 
     /// Whether retrying after a reconnection may help (transport failures, not refusals).

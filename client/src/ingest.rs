@@ -5,6 +5,10 @@
 //! control never stalls the sender) and reopens the stream with backoff when it breaks. Envelopes
 //! in flight at a break are lost and counted (`sent - acked`). Over Zenoh each message is a `put`
 //! on the vehicle's key (congestion control `Block`: never dropped locally); there are no acks.
+//!
+//! Refusals are not retried: an ack `PERMISSION_DENIED` (a vehicle outside the caller's grants)
+//! is counted with its reason ([`IngestStats::permission_denied`]); a stream refused as a whole
+//! (`Unauthenticated`, `PermissionDenied`) is not reopened, and later sends return that refusal.
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -39,6 +43,12 @@ pub struct IngestStats {
     ok: AtomicU64,
     statuses: Mutex<BTreeMap<String, u64>>,
     errors: Mutex<BTreeMap<String, u64>>,
+    /// PERMISSION_DENIED acks by the service's reason.
+    denied: Mutex<BTreeMap<String, u64>>,
+    /// The status that refused the whole stream (it is not reopened), and a flag the hot path
+    /// reads without a lock.
+    refused: Mutex<Option<(tonic::Code, String)>>,
+    is_refused: std::sync::atomic::AtomicBool,
 }
 
 impl IngestStats {
@@ -88,6 +98,25 @@ impl IngestStats {
         }
     }
 
+    /// Acks `PERMISSION_DENIED` (vehicles outside the caller's grants) by the service's reason.
+    pub fn permission_denied(&self) -> BTreeMap<String, u64> {
+        self.denied.lock().map(|m| m.clone()).unwrap_or_default()
+    }
+
+    /// Acks that were not ACCEPTED (refused for any reason, PERMISSION_DENIED included).
+    pub fn refused(&self) -> u64 {
+        self.statuses
+            .lock()
+            .map(|m| m.values().sum())
+            .unwrap_or_default()
+    }
+
+    /// The refusal that ended the stream (`Unauthenticated`, `PermissionDenied`), if any.
+    pub fn stream_refusal(&self, op: &'static str) -> Option<ClientError> {
+        let r = self.refused.lock().ok()?.clone()?;
+        Some(ClientError::rpc(op, tonic::Status::new(r.0, r.1)))
+    }
+
     /// Transport errors by message.
     pub fn errors(&self) -> BTreeMap<String, u64> {
         self.errors.lock().map(|m| m.clone()).unwrap_or_default()
@@ -102,6 +131,16 @@ impl IngestStats {
             self.ok.fetch_add(1, Ordering::Relaxed);
         } else {
             self.status(status.as_str_name().trim_start_matches("INGEST_STATUS_"));
+            if status == pb::IngestStatus::PermissionDenied
+                && let Ok(mut m) = self.denied.lock()
+            {
+                let reason = if ack.reason.is_empty() {
+                    format!("vehicle '{}' outside the caller's grants", ack.vehicle_id)
+                } else {
+                    ack.reason.clone()
+                };
+                *m.entry(reason).or_default() += 1;
+            }
         }
     }
 }
@@ -191,6 +230,13 @@ impl IngestSender {
         let leaf = leaf_of(&payload);
         match &self.sink {
             Sink::Grpc(tx) => {
+                // Fail fast: the request side of a refused stream may still be held by the
+                // transport for a moment, and sends would fill its buffer for nothing.
+                if self.stats.is_refused.load(Ordering::Relaxed)
+                    && let Some(e) = self.stats.stream_refusal("Ingest")
+                {
+                    return Err(e);
+                }
                 let sequence = self.seq.fetch_add(1, Ordering::Relaxed);
                 let len = payload_len(&payload);
                 let env = pb::SensorEnvelope {
@@ -198,9 +244,12 @@ impl IngestSender {
                     sequence,
                     payload: Some(payload),
                 };
-                tx.send(env)
-                    .await
-                    .map_err(|_| ClientError::Closed("ingest stream"))?;
+                if tx.send(env).await.is_err() {
+                    return Err(self
+                        .stats
+                        .stream_refusal("Ingest")
+                        .unwrap_or(ClientError::Closed("ingest stream")));
+                }
                 self.stats.bytes.fetch_add(len as u64, Ordering::Relaxed);
             }
             #[cfg(feature = "zenoh")]
@@ -365,12 +414,16 @@ pub(crate) fn spawn_grpc_driver(
                             }
                             Ok(None) if closed.load(Ordering::Acquire) => return,
                             Ok(None) => break "the service ended the ingest stream".to_string(),
+                            Err(status) if is_refusal(&status) => {
+                                return refuse(&stats, status);
+                            }
                             Err(status) => {
                                 break format!("{:?}: {}", status.code(), status.message());
                             }
                         }
                     }
                 }
+                Err(status) if is_refusal(&status) => return refuse(&stats, status),
                 Err(status) => format!("{:?}: {}", status.code(), status.message()),
             };
             stats.error(last.clone());
@@ -387,6 +440,23 @@ pub(crate) fn spawn_grpc_driver(
             tokio::time::sleep(delay).await;
         }
     })
+}
+
+fn is_refusal(status: &tonic::Status) -> bool {
+    matches!(
+        status.code(),
+        tonic::Code::Unauthenticated | tonic::Code::PermissionDenied
+    )
+}
+
+/// Ends the stream on a refusal: counted as an error, kept for `send` to return.
+fn refuse(stats: &IngestStats, status: tonic::Status) {
+    tracing::error!(code = ?status.code(), reason = status.message(), "ingest stream refused; not reopening");
+    stats.error(format!("{:?}: {}", status.code(), status.message()));
+    if let Ok(mut r) = stats.refused.lock() {
+        *r = Some((status.code(), status.message().to_string()));
+    }
+    stats.is_refused.store(true, Ordering::Release);
 }
 
 /// The request side: pulls from the user's channel; marks `closed` when the user is done.

@@ -9,8 +9,9 @@
 //!
 //! | module | what it holds |
 //! |---|---|
-//! | [`endpoint`] | [`Endpoint`]: `grpc://HOST:PORT`, `zenoh[/ENDPOINT[,ENDPOINT…]]`, `discard` URLs, parsed in one place |
-//! | [`error`] | [`ClientError`]: what failed, with the operation and the transport's reason |
+//! | [`endpoint`] | [`Endpoint`]: `grpc://HOST:PORT`, `grpcs://HOST:PORT`, `zenoh[/ENDPOINT[,ENDPOINT…]]`, `discard` URLs, parsed in one place |
+//! | [`security`] | [`TlsOptions`], the bearer-token interceptor, Zenoh TLS settings, the no-token-in-clear rule |
+//! | [`error`] | [`ClientError`]: what failed, with the operation and the transport's reason (refusals: `Unauthenticated`, `PermissionDenied`) |
 //! | [`backoff`] | [`Backoff`]: reconnection delays (exponential, capped) |
 //! | [`client`] | [`Client`]: connect, list, get pose, configure, reset, watch poses/health, ingest |
 //! | [`ingest`] | [`Ingest`] / [`IngestSender`]: a vehicle's sensor stream into the service, with counted acks |
@@ -26,6 +27,13 @@
 //! without learning whether the vehicle was created. Built without the `zenoh` feature, a `zenoh…`
 //! endpoint still parses, and [`Client::connect`] to it returns [`ClientError::Unsupported`].
 //!
+//! A service reached over a network is secured ([`security`]): `grpcs://HOST:PORT` or Zenoh
+//! `tls/HOST:PORT` locators with [`ConnectOptions::tls`] (the deployment's CA, and this ground
+//! station's certificate for mutual TLS), and a bearer token ([`ConnectOptions::token`]) sent on
+//! every gRPC request. The service's refusals are [`ClientError::Unauthenticated`] and
+//! [`ClientError::PermissionDenied`], never retried; an ingest ack `PERMISSION_DENIED` is counted
+//! with its reason ([`IngestStats::permission_denied`]).
+//!
 //! `examples/feed_recording.rs` streams a recording into a running service and prints the poses
 //! it gets back, with this crate alone.
 
@@ -37,6 +45,7 @@ pub mod grpc;
 pub mod ingest;
 #[cfg(feature = "recording")]
 pub mod recording;
+pub mod security;
 pub mod watch;
 #[cfg(feature = "zenoh")]
 pub mod zenoh_backend;
@@ -46,6 +55,7 @@ pub use client::{Client, ConnectOptions};
 pub use endpoint::Endpoint;
 pub use error::ClientError;
 pub use ingest::{Ingest, IngestSender, IngestStats};
+pub use security::TlsOptions;
 pub use uavnav_proto::keys;
 pub use uavnav_proto::v1 as pb;
 pub use watch::{Selector, Watch};

@@ -4,7 +4,8 @@
 //! subscription fails or ends, reopens it after the [`Backoff`] delays (the attempt count restarts
 //! after every item received). Items published while disconnected are missed; the watch resumes
 //! with the next ones. When the backoff gives up, the watch yields one [`ClientError::GaveUp`] and
-//! ends.
+//! ends. A refusal by the service (`Unauthenticated`, `PermissionDenied`) is yielded and ends the
+//! watch at once: the same credentials would be refused again.
 
 use std::future::Future;
 use std::sync::Arc;
@@ -124,6 +125,11 @@ impl<T: Send + 'static> Watch<T> {
                                 if tx.send(Ok(item)).await.is_err() {
                                     return;
                                 }
+                            }
+                            // A refusal (credentials revoked, grant narrowed) stays a refusal.
+                            Some(Err(e)) if e.is_refusal() => {
+                                let _ = tx.send(Err(e)).await;
+                                return;
                             }
                             Some(Err(e)) => break e.to_string(),
                             None => break "the service ended the stream".to_string(),

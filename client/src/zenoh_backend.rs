@@ -1,5 +1,6 @@
 //! The Zenoh backend: a session configured from the endpoint, puts on the vehicle input keys,
-//! subscribers on the output keys, queries on the queryables (see [`crate::keys`]).
+//! subscribers on the output keys, queries on the queryables (see [`crate::keys`]). `tls/`
+//! locators take their settings from [`crate::TlsOptions`] ([`crate::security::zenoh_tls`]).
 
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -9,9 +10,11 @@ use prost::Message;
 use zenoh::Session;
 use zenoh::bytes::Encoding;
 
+use crate::client::ConnectOptions;
 use crate::error::ClientError;
 use crate::keys::{self, Leaf};
 use crate::pb;
+use crate::security::{self, TlsOptions};
 use crate::watch::Selector;
 
 /// The Zenoh encoding of a uavnav.v1 message ([`keys::encoding_for`], the service's too).
@@ -19,9 +22,31 @@ pub fn encoding(full_name: &str) -> Encoding {
     Encoding::from(keys::encoding_for(full_name))
 }
 
-/// The session configuration for an endpoint's locators (none = default config with scouting).
-pub fn session_config(connect: &[String], client_mode: bool) -> Result<zenoh::Config, ClientError> {
+/// The session configuration for an endpoint's locators (none = default config with scouting),
+/// with TLS when `tls` is given (needed by `tls/` locators, refused without one: the caller expects
+/// an encrypted link).
+pub fn session_config(
+    connect: &[String],
+    client_mode: bool,
+    tls: Option<&TlsOptions>,
+) -> Result<zenoh::Config, ClientError> {
     let mut z = zenoh::Config::default();
+    let uses_tls = connect.iter().any(|c| c.starts_with("tls/"));
+    match tls {
+        Some(t) if uses_tls => security::zenoh_tls(&mut z, t)?,
+        Some(_) => {
+            return Err(ClientError::Tls {
+                reason: "TLS options given for a Zenoh endpoint without a tls/HOST:PORT locator"
+                    .into(),
+            });
+        }
+        None if uses_tls => {
+            return Err(ClientError::Tls {
+                reason: "a tls/ Zenoh locator needs TLS options: at least the CA that signed the service certificate".into(),
+            });
+        }
+        None => {}
+    }
     let set = |z: &mut zenoh::Config, key: &str, value: String| {
         z.insert_json5(key, &value)
             .map_err(|e| ClientError::Connect {
@@ -47,14 +72,18 @@ pub fn session_config(connect: &[String], client_mode: bool) -> Result<zenoh::Co
 pub async fn open(
     connect: &[String],
     client_mode: bool,
-    timeout: Duration,
+    opts: &ConnectOptions,
 ) -> Result<Session, ClientError> {
+    let timeout = opts.connect_timeout;
+    if opts.token.is_some() {
+        tracing::debug!("Zenoh authenticates by client certificate: the token is not sent");
+    }
     let endpoint = if connect.is_empty() {
         "zenoh".to_string()
     } else {
         format!("zenoh/{}", connect.join(","))
     };
-    let session = zenoh::open(session_config(connect, client_mode)?)
+    let session = zenoh::open(session_config(connect, client_mode, opts.tls.as_ref())?)
         .await
         .map_err(|e| ClientError::Connect {
             endpoint: endpoint.clone(),
@@ -74,7 +103,15 @@ pub async fn open(
             let _ = session.close().await;
             return Err(ClientError::Connect {
                 endpoint,
-                reason: format!("no Zenoh peer or router reachable within {timeout:?}"),
+                reason: if opts.tls.is_some() {
+                    format!(
+                        "no Zenoh peer or router reachable within {timeout:?} (with TLS: also a \
+                         refused certificate, e.g. an unknown CA, a name mismatch or no client \
+                         certificate where mutual TLS is required)"
+                    )
+                } else {
+                    format!("no Zenoh peer or router reachable within {timeout:?}")
+                },
             });
         }
         tokio::time::sleep(Duration::from_millis(20)).await;

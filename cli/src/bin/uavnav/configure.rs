@@ -7,16 +7,19 @@ use uavnav_client::pb;
 use uavnav_core::{FilterProfile, VehicleConfig};
 
 use crate::common::{CliError, CliResult};
-use crate::endpoint::{DEFAULT_URL, block_on, client_err, connect};
+use crate::endpoint::{DEFAULT_URL, SecurityArgs, block_on, client_err, connect};
 
 /// Arguments of `uavnav configure`.
 #[derive(Debug, clap::Args)]
 #[command(after_help = crate::EXIT_CODES)]
 #[command(group(clap::ArgGroup::new("source").required(true).args(["dataset", "scenario"])))]
 pub struct Args {
-    /// Service URL (grpc://HOST:PORT, zenoh, zenoh/tcp/HOST:PORT).
+    /// Service URL (grpc://HOST:PORT, grpcs://HOST:PORT, zenoh, zenoh/tcp/HOST:PORT, zenoh/tls/HOST:PORT).
     #[arg(long, env = "UAVNAV_SERVICE", default_value = DEFAULT_URL)]
     pub from: String,
+    /// TLS and token.
+    #[command(flatten)]
+    pub security: SecurityArgs,
     /// The vehicle to configure.
     #[arg(long)]
     pub vehicle: String,
@@ -69,7 +72,7 @@ pub fn run(args: Args) -> CliResult {
     }
     let wire = pb::VehicleConfig::from(&config);
     block_on(async move {
-        let client = connect(&args.from).await?;
+        let client = connect(&args.from, &args.security).await?;
         let created = client
             .configure(&args.vehicle, &wire)
             .await

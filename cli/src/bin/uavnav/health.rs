@@ -12,15 +12,18 @@ use std::time::Duration;
 use uavnav_client::{Selector, pb, unix_now_ns};
 
 use crate::common::{CliError, CliResult};
-use crate::endpoint::{DEFAULT_URL, block_on, client_err, connect, mode_name};
+use crate::endpoint::{DEFAULT_URL, SecurityArgs, block_on, client_err, connect, mode_name};
 
 /// Arguments of `uavnav health`.
 #[derive(Debug, clap::Args)]
 #[command(after_help = crate::EXIT_CODES)]
 pub struct Args {
-    /// Service URL (grpc://HOST:PORT, zenoh, zenoh/tcp/HOST:PORT).
+    /// Service URL (grpc://HOST:PORT, grpcs://HOST:PORT, zenoh, zenoh/tcp/HOST:PORT, zenoh/tls/HOST:PORT).
     #[arg(long, env = "UAVNAV_SERVICE", default_value = DEFAULT_URL)]
     pub from: String,
+    /// TLS and token.
+    #[command(flatten)]
+    pub security: SecurityArgs,
     /// A vehicle to report (repeatable).
     #[arg(long)]
     pub vehicle: Vec<String>,
@@ -91,7 +94,7 @@ fn line(h: &pb::VehicleHealth, json: bool) -> String {
 /// Runs the command.
 pub fn run(args: Args) -> CliResult {
     block_on(async move {
-        let client = connect(&args.from).await?;
+        let client = connect(&args.from, &args.security).await?;
         let known = client.list_vehicles("").await.map_err(client_err)?;
         let sel = if args.all {
             Selector::all()

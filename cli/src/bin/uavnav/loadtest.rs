@@ -22,7 +22,7 @@ use uavnav_cli::schedule::{self, ScheduleParams};
 use uavnav_client::{Client, pb};
 
 use crate::common::{CliError, CliResult, progress};
-use crate::endpoint::{DEFAULT_URL, block_on_threads, client_err, connect};
+use crate::endpoint::{DEFAULT_URL, SecurityArgs, block_on_threads, client_err, connect};
 
 /// The built-in flight (the repository's smoke scenario).
 const SMOKE_SCENARIO: &str = include_str!("../../../../scenarios/smoke.toml");
@@ -35,9 +35,12 @@ const MAX_FLIGHT_S: f64 = 900.0;
 #[derive(Debug, clap::Args)]
 #[command(after_help = crate::EXIT_CODES)]
 pub struct Args {
-    /// Service URL: grpc://HOST:PORT, zenoh/tcp/HOST:PORT, or `discard` (the generator alone).
+    /// Service URL: grpc://HOST:PORT, grpcs://HOST:PORT, zenoh/tcp/HOST:PORT, zenoh/tls/HOST:PORT, or `discard` (the generator alone).
     #[arg(long, env = "UAVNAV_SERVICE", default_value = DEFAULT_URL)]
     pub to: String,
+    /// TLS and token.
+    #[command(flatten)]
+    pub security: SecurityArgs,
     /// Vehicles driven at once (with --ramp: the first stage).
     #[arg(long, default_value_t = 10)]
     pub vehicles: usize,
@@ -239,7 +242,7 @@ pub fn run(args: Args) -> CliResult {
         max_error_rate: args.max_error_rate,
     };
     block_on_threads(args.threads, async move {
-        let client = connect(&args.to).await?;
+        let client = connect(&args.to, &args.security).await?;
         let target = client.endpoint().to_string();
         let tag = run_tag();
         if !args.ramp {

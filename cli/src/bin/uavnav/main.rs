@@ -4,13 +4,16 @@
 //! diagnostics to stderr. Exit codes (also in `--help`):
 //! - 0: success;
 //! - 1: the command failed at run time (I/O, service unreachable, ...);
-//! - 2: bad usage or bad input (a malformed dataset, scenario or argument), with a one-line reason;
+//! - 2: bad usage or bad input (a malformed dataset, scenario or argument; TLS or token settings
+//!   that cannot be used; credentials or grants the service refuses), with a one-line reason;
 //! - 3: the command ran but a checked target was missed (e.g. `loadtest` fell behind real time).
 
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod certs;
+mod certs_der;
 mod common;
 mod convert;
 mod demo;
@@ -18,7 +21,8 @@ mod estimate;
 mod estimate_report;
 mod simulate;
 mod vision;
-// online subcommands (issue 6)
+// online subcommands (issue 6); their TLS and token options are in `endpoint`
+
 mod configure;
 mod endpoint;
 mod health;
@@ -30,7 +34,8 @@ mod vehicles;
 mod watch;
 
 const EXIT_CODES: &str = "Exit codes: 0 success; 1 run-time failure (I/O, service unreachable); \
-2 bad usage or bad input (one-line reason on stderr); 3 a checked target was missed.";
+2 bad usage or bad input (one-line reason on stderr), including TLS or token settings that cannot \
+be used and credentials or grants the service refuses; 3 a checked target was missed.";
 
 /// uavnav: position and attitude of UAVs from IMU, GNSS and camera.
 #[derive(Debug, Parser)]
@@ -68,6 +73,8 @@ enum Command {
     Reset(reset::Args),
     /// Drive N vehicles at real rates and measure latency, throughput and errors.
     Loadtest(loadtest::Args),
+    /// Make a private CA, service and ground-station certificates, and bearer tokens.
+    Certs(certs::Args),
 }
 
 /// mimalloc, as in `uavnavd`: the load generator and the in-process service of `demo` allocate a
@@ -95,6 +102,7 @@ fn run() -> ExitCode {
         Command::Configure(a) => configure::run(a),
         Command::Reset(a) => reset::run(a),
         Command::Loadtest(a) => loadtest::run(a),
+        Command::Certs(a) => certs::run(a),
     };
     common::finish(result)
 }

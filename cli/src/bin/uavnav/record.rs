@@ -19,15 +19,18 @@ use crate::common::{CliError, CliResult};
 
 /// Stands for "no limit" in deadlines (a year; never overflows `Instant`).
 const FOREVER: Duration = Duration::from_secs(365 * 86_400);
-use crate::endpoint::{DEFAULT_URL, block_on, client_err, connect};
+use crate::endpoint::{DEFAULT_URL, SecurityArgs, block_on, client_err, connect};
 
 /// Arguments of `uavnav record`.
 #[derive(Debug, clap::Args)]
 #[command(after_help = crate::EXIT_CODES)]
 pub struct Args {
-    /// Service URL; Zenoh (zenoh, zenoh/tcp/HOST:PORT) records inputs and outputs, gRPC outputs only.
+    /// Service URL; Zenoh (zenoh, zenoh/tcp/HOST:PORT, zenoh/tls/HOST:PORT) records inputs and outputs, gRPC outputs only.
     #[arg(long, env = "UAVNAV_SERVICE", default_value = DEFAULT_URL)]
     pub from: String,
+    /// TLS and token.
+    #[command(flatten)]
+    pub security: SecurityArgs,
     /// The MCAP file to write.
     #[arg(long)]
     pub out: PathBuf,
@@ -154,7 +157,7 @@ pub fn has_config(ds: &uavnav_dataset::Dataset) -> bool {
 pub fn run(args: Args) -> CliResult {
     let mut sink = McapSink::create(&args.out)?;
     block_on(async move {
-        let client = connect(&args.from).await?;
+        let client = connect(&args.from, &args.security).await?;
         let stop = tokio::time::sleep(args.duration.map_or(FOREVER, Duration::from_secs_f64));
         tokio::pin!(stop);
         let idle = args.idle_exit.map(Duration::from_secs_f64);

@@ -15,7 +15,7 @@ use uavnav_cli::schedule::{Batcher, ScheduleParams, TimedMessage};
 use uavnav_client::{IngestSender, pb};
 
 use crate::common::{CliError, CliResult};
-use crate::endpoint::{DEFAULT_URL, block_on, client_err, connect};
+use crate::endpoint::{DEFAULT_URL, SecurityArgs, block_on, client_err, connect};
 
 /// Arguments of `uavnav replay`.
 #[derive(Debug, clap::Args)]
@@ -25,9 +25,12 @@ pub struct Args {
     /// log (ArduPilot `.BIN`, PX4 `.ulg`; its derived configuration, GNSS delay included, is sent
     /// first).
     pub dataset: PathBuf,
-    /// Service URL (grpc://HOST:PORT, zenoh, zenoh/tcp/HOST:PORT).
+    /// Service URL (grpc://HOST:PORT, grpcs://HOST:PORT, zenoh, zenoh/tcp/HOST:PORT, zenoh/tls/HOST:PORT).
     #[arg(long, env = "UAVNAV_SERVICE", default_value = DEFAULT_URL)]
     pub to: String,
+    /// TLS and token.
+    #[command(flatten)]
+    pub security: SecurityArgs,
     /// Replay speed (1 = real time).
     #[arg(long, default_value_t = 1.0, conflicts_with = "max")]
     pub speed: f64,
@@ -139,7 +142,7 @@ pub fn run(args: Args) -> CliResult {
         )));
     }
     block_on(async move {
-        let client = connect(&args.to).await?;
+        let client = connect(&args.to, &args.security).await?;
         if client.zenoh_session().is_some() {
             // Let the service's subscriptions reach us before the first put.
             tokio::time::sleep(Duration::from_millis(300)).await;
@@ -187,6 +190,9 @@ pub fn run(args: Args) -> CliResult {
             stats.errors(),
             start.elapsed().as_secs_f64()
         );
+        for (reason, n) in stats.permission_denied() {
+            eprintln!("uavnav: {n} messages refused (PERMISSION_DENIED): {reason}");
+        }
         client.close().await;
         match first_err {
             Some(e) => Err(e),

@@ -3,15 +3,18 @@
 use uavnav_client::unix_now_ns;
 
 use crate::common::{CliError, CliResult};
-use crate::endpoint::{DEFAULT_URL, block_on, client_err, connect, mode_name};
+use crate::endpoint::{DEFAULT_URL, SecurityArgs, block_on, client_err, connect, mode_name};
 
 /// Arguments of `uavnav vehicles`.
 #[derive(Debug, clap::Args)]
 #[command(after_help = crate::EXIT_CODES)]
 pub struct Args {
-    /// Service URL (grpc://HOST:PORT, zenoh, zenoh/tcp/HOST:PORT).
+    /// Service URL (grpc://HOST:PORT, grpcs://HOST:PORT, zenoh, zenoh/tcp/HOST:PORT, zenoh/tls/HOST:PORT).
     #[arg(long, env = "UAVNAV_SERVICE", default_value = DEFAULT_URL)]
     pub from: String,
+    /// TLS and token.
+    #[command(flatten)]
+    pub security: SecurityArgs,
     /// Only vehicles whose id starts with this.
     #[arg(long, default_value = "")]
     pub prefix: String,
@@ -23,7 +26,7 @@ pub struct Args {
 /// Runs the command: a table `vehicle_id mode last_t_s input_age_s configured` on stdout.
 pub fn run(args: Args) -> CliResult {
     block_on(async move {
-        let client = connect(&args.from).await?;
+        let client = connect(&args.from, &args.security).await?;
         let list = client
             .list_vehicles(&args.prefix)
             .await

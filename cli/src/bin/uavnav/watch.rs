@@ -27,15 +27,18 @@ use crate::common::{CliError, CliResult};
 
 /// Stands for "no limit" in deadlines (a year; never overflows `Instant`).
 const FOREVER: Duration = Duration::from_secs(365 * 86_400);
-use crate::endpoint::{DEFAULT_URL, block_on, client_err, connect};
+use crate::endpoint::{DEFAULT_URL, SecurityArgs, block_on, client_err, connect};
 
 /// Arguments of `uavnav watch`.
 #[derive(Debug, clap::Args)]
 #[command(after_help = crate::EXIT_CODES)]
 pub struct Args {
-    /// Service URL (grpc://HOST:PORT, zenoh, zenoh/tcp/HOST:PORT).
+    /// Service URL (grpc://HOST:PORT, grpcs://HOST:PORT, zenoh, zenoh/tcp/HOST:PORT, zenoh/tls/HOST:PORT).
     #[arg(long, env = "UAVNAV_SERVICE", default_value = DEFAULT_URL)]
     pub from: String,
+    /// TLS and token.
+    #[command(flatten)]
+    pub security: SecurityArgs,
     /// Watch this vehicle (repeatable).
     #[arg(long)]
     pub vehicle: Vec<String>,
@@ -183,7 +186,7 @@ pub fn run(args: Args) -> CliResult {
         _ => Out::open(args.out.as_ref())?,
     };
     block_on(async move {
-        let client = connect(&args.from).await?;
+        let client = connect(&args.from, &args.security).await?;
         let sel = selector(&args);
         let live = match &args.foxglove {
             Some(addr) => Some(start_live_view(addr, &client, &sel).await?),
