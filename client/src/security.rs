@@ -186,23 +186,6 @@ pub fn check_token_transport(
     })
 }
 
-/// A JSON string literal of `s` (Zenoh's config values are JSON5).
-#[cfg_attr(not(feature = "zenoh"), allow(dead_code))]
-fn json_string(s: &str) -> String {
-    let mut out = String::with_capacity(s.len() + 2);
-    out.push('"');
-    for c in s.chars() {
-        match c {
-            '"' => out.push_str("\\\""),
-            '\\' => out.push_str("\\\\"),
-            c if (c as u32) < 0x20 => out.push_str(&format!("\\u{:04x}", c as u32)),
-            c => out.push(c),
-        }
-    }
-    out.push('"');
-    out
-}
-
 /// Sets the Zenoh TLS link keys of `tls` on `z`, and turns off what a TLS client must not expose.
 #[cfg(feature = "zenoh")]
 pub fn zenoh_tls(z: &mut zenoh::Config, tls: &TlsOptions) -> Result<(), ClientError> {
@@ -212,7 +195,7 @@ pub fn zenoh_tls(z: &mut zenoh::Config, tls: &TlsOptions) -> Result<(), ClientEr
         let s = p
             .to_str()
             .ok_or_else(|| tls_err(format!("{} is not a UTF-8 path", p.display())))?;
-        Ok(json_string(s))
+        Ok(uavnav_proto::keys::json_string(s))
     };
     let mut set = |key: &str, value: String| {
         z.insert_json5(key, &value)
@@ -278,10 +261,5 @@ mod tests {
         );
         assert!(AuthInterceptor::new(Some("a b")).is_err());
         assert!(AuthInterceptor::new(Some("  ")).is_err());
-    }
-
-    #[test]
-    fn json_strings_are_escaped() {
-        assert_eq!(json_string(r#"/a "b"\c"#), r#""/a \"b\"\\c""#);
     }
 }

@@ -154,6 +154,24 @@ pub fn vehicle_key(id: &str, leaf: Leaf) -> String {
     format!("{VEHICLE_PREFIX}/{id}/{}", leaf.as_str())
 }
 
+/// A JSON string literal of `s`: Zenoh configuration values are JSON5, and the service and the
+/// client both put paths and names from their own configuration into one (quotes, backslashes
+/// and control characters escaped).
+pub fn json_string(s: &str) -> String {
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push('"');
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            c if (c as u32) < 0x20 => out.push_str(&format!("\\u{:04x}", c as u32)),
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
 /// `uavnav/v1/vehicle/{id}/pose/latest` (the latest-pose queryable).
 pub fn pose_latest_key(id: &str) -> String {
     format!("{VEHICLE_PREFIX}/{id}/pose/latest")
@@ -263,6 +281,12 @@ mod tests {
         for leaf in Leaf::INPUTS {
             assert!(leaf.decode_input(&[]).is_some(), "{leaf:?}");
         }
+    }
+
+    #[test]
+    fn json_strings_are_escaped() {
+        assert_eq!(json_string(r#"/a "b"\c"#), r#""/a \"b\"\\c""#);
+        assert_eq!(json_string("a\nb"), r#""a\u000ab""#);
     }
 
     #[test]

@@ -44,13 +44,17 @@ impl UavNavService {
     }
 
     fn stopping(&self) -> watch::Receiver<bool> {
+        self.service.hub().stopping.clone()
+    }
+
+    /// The selection of a watch request, once the caller is known and may watch all of it.
+    fn watch_selector(&self, request: &Request<pb::WatchRequest>) -> Result<Selector, Status> {
+        let access = self.access(request)?;
+        let sel = Selector::from_request(request.get_ref())?;
         self.service
-            .ingestor()
-            .registry()
-            .ctx()
-            .hub
-            .stopping
-            .clone()
+            .authorize_watch(&access, &sel.ids, &sel.prefix, sel.all)
+            .map_err(|e| e.to_status())?;
+        Ok(sel)
     }
 
     /// Who is calling: the verified client certificate of the connection (TLS) and the
@@ -394,19 +398,8 @@ impl UavNav for UavNavService {
         &self,
         request: Request<pb::WatchRequest>,
     ) -> Result<Response<Self::WatchPosesStream>, Status> {
-        let access = self.access(&request)?;
-        let sel = Selector::from_request(request.get_ref())?;
-        self.service
-            .authorize_watch(&access, &sel.ids, &sel.prefix, sel.all)
-            .map_err(|e| e.to_status())?;
-        let rx = self
-            .service
-            .ingestor()
-            .registry()
-            .ctx()
-            .hub
-            .poses
-            .subscribe();
+        let sel = self.watch_selector(&request)?;
+        let rx = self.service.hub().poses.subscribe();
         Ok(Response::new(self.watch(rx, sel)))
     }
 
@@ -414,19 +407,8 @@ impl UavNav for UavNavService {
         &self,
         request: Request<pb::WatchRequest>,
     ) -> Result<Response<Self::WatchHealthStream>, Status> {
-        let access = self.access(&request)?;
-        let sel = Selector::from_request(request.get_ref())?;
-        self.service
-            .authorize_watch(&access, &sel.ids, &sel.prefix, sel.all)
-            .map_err(|e| e.to_status())?;
-        let rx = self
-            .service
-            .ingestor()
-            .registry()
-            .ctx()
-            .hub
-            .health
-            .subscribe();
+        let sel = self.watch_selector(&request)?;
+        let rx = self.service.hub().health.subscribe();
         Ok(Response::new(self.watch(rx, sel)))
     }
 

@@ -47,6 +47,11 @@ impl Service {
         &self.ingestor.registry().ctx().metrics
     }
 
+    /// The output hub (what watches subscribe to).
+    pub fn hub(&self) -> &crate::hub::Hub {
+        &self.ingestor.registry().ctx().hub
+    }
+
     /// Whether authorization is on (principals configured).
     pub fn auth_enabled(&self) -> bool {
         self.auth.enabled()

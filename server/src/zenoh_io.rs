@@ -79,10 +79,7 @@ pub fn session_config(cfg: &ZenohConfig, sec: &SecurityConfig) -> anyhow::Result
 }
 
 fn serde_json_list(v: &[String]) -> String {
-    let items: Vec<String> = v
-        .iter()
-        .map(|s| format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\"")))
-        .collect();
+    let items: Vec<String> = v.iter().map(|s| keys::json_string(s)).collect();
     format!("[{}]", items.join(","))
 }
 

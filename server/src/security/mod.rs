@@ -143,14 +143,7 @@ impl SecurityMetrics {
         reason: &'static str,
         verb: Option<Verb>,
     ) {
-        self.auth_refused
-            .get_or_create(&AuthLabels {
-                transport,
-                principal: principal.to_owned(),
-                reason,
-                verb: verb.map_or("-", Verb::as_str),
-            })
-            .inc();
+        self.counter(transport, principal, reason, verb).inc();
     }
 
     /// The number of refusals with these labels.
@@ -161,6 +154,16 @@ impl SecurityMetrics {
         reason: &'static str,
         verb: Option<Verb>,
     ) -> u64 {
+        self.counter(transport, principal, reason, verb).get()
+    }
+
+    fn counter(
+        &self,
+        transport: &'static str,
+        principal: &str,
+        reason: &'static str,
+        verb: Option<Verb>,
+    ) -> Counter {
         self.auth_refused
             .get_or_create(&AuthLabels {
                 transport,
@@ -168,7 +171,7 @@ impl SecurityMetrics {
                 reason,
                 verb: verb.map_or("-", Verb::as_str),
             })
-            .get()
+            .clone()
     }
 }
 

@@ -21,7 +21,7 @@
 //! admin space is closed.
 
 use anyhow::anyhow;
-use uavnav_proto::keys::{self, Leaf};
+use uavnav_proto::keys::{self, Leaf, json_string as json_str};
 
 use super::{SecurityConfig, Verb};
 
@@ -198,22 +198,6 @@ fn rule(id: &str, messages: &[&str], flow: &str, exprs: &[String]) -> String {
         json_str(flow),
         k.join(", ")
     )
-}
-
-/// A JSON string literal.
-fn json_str(s: &str) -> String {
-    let mut out = String::with_capacity(s.len() + 2);
-    out.push('"');
-    for c in s.chars() {
-        match c {
-            '"' => out.push_str("\\\""),
-            '\\' => out.push_str("\\\\"),
-            c if (c as u32) < 0x20 => out.push_str(&format!("\\u{:04x}", c as u32)),
-            c => out.push(c),
-        }
-    }
-    out.push('"');
-    out
 }
 
 #[cfg(test)]
