@@ -166,7 +166,9 @@ until [ "$(docker inspect -f '{{.State.Health.Status}}' "$svc")" = healthy ]; do
 done
 t_healthy_s=$(since "$t_up")
 docker cp "$svc:/certs/ca.pem" "$tmp/ca.pem" || fail "no CA certificate in the certs volume"
-say "uavnavd healthy $t_healthy_s s after compose up; /readyz over TLS: $(curl -fsS --cacert "$tmp/ca.pem" "https://localhost:$http_port/readyz" 2>/dev/null || echo '(curl failed)')"
+for f in ops.pem ops.key; do docker cp "$svc:/certs/$f" "$tmp/$f" || fail "no $f in the certs volume"; done
+# Every caller presents a certificate here (require_client_certificate), the probes' too.
+say "uavnavd healthy $t_healthy_s s after compose up; /readyz over mutual TLS: $(curl -fsS --cacert "$tmp/ca.pem" --cert "$tmp/ops.pem" --key "$tmp/ops.key" "https://localhost:$http_port/readyz" 2>/dev/null || echo '(curl failed)')"
 
 # --- security: nothing gets in without the deployment's certificates and grants -------------------
 refused() { # refused WHAT CMD...: the command must fail
@@ -174,7 +176,8 @@ refused() { # refused WHAT CMD...: the command must fail
     if "$@" >/dev/null 2>&1; then fail "security: $what was let in"; fi
     say "security: $what refused"
 }
-refused "plaintext gRPC" docker exec "$svc" /usr/local/bin/uavnav vehicles --from grpc://127.0.0.1:50051
+# (the client retries a bare transport error for a while: 10 s is enough to know it got nothing)
+refused "plaintext gRPC" timeout 10 docker exec "$svc" /usr/local/bin/uavnav vehicles --from grpc://127.0.0.1:50051
 refused "TLS without a client certificate" docker exec "$svc" /usr/local/bin/uavnav vehicles \
     --from grpcs://localhost:50051 --tls-ca /certs/ca.pem
 refused "plaintext HTTP" curl -fsS --max-time 3 "http://127.0.0.1:$http_port/readyz"

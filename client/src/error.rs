@@ -128,11 +128,46 @@ pub enum ClientError {
     },
 }
 
+/// A transport failure that retrying cannot fix: a TLS handshake the service refused (no, expired
+/// or untrusted client certificate) or plaintext HTTP/2 spoken to a TLS port. Found in the
+/// status's error chain (tonic reports both as a generic transport error).
+fn tls_mismatch(status: &tonic::Status) -> Option<String> {
+    if !matches!(
+        status.code(),
+        tonic::Code::Unavailable | tonic::Code::Unknown | tonic::Code::Internal
+    ) {
+        return None;
+    }
+    let mut chain = vec![status.message().to_string()];
+    let mut cur = std::error::Error::source(status);
+    while let Some(e) = cur {
+        chain.push(e.to_string());
+        cur = e.source();
+    }
+    let text = chain.join(": ");
+    let lower = text.to_ascii_lowercase();
+    if lower.contains("h2 protocol error") || lower.contains("frame with invalid size") {
+        Some(format!(
+            "{text} (the service may speak TLS: use grpcs:// with --tls-ca)"
+        ))
+    } else if lower.contains("received fatal alert")
+        || lower.contains("invalid peer certificate")
+        || lower.contains("certificate required")
+    {
+        Some(format!("TLS handshake refused: {text}"))
+    } else {
+        None
+    }
+}
+
 impl ClientError {
     /// A gRPC status as an error of operation `op` (the service's refusals get their own
     /// variants: they are never retried).
     pub fn rpc(op: &'static str, status: tonic::Status) -> Self {
         let reason = status.message().to_string();
+        if let Some(tls) = tls_mismatch(&status) {
+            return ClientError::Tls { reason: tls };
+        }
         match status.code() {
             tonic::Code::Unauthenticated => ClientError::Unauthenticated { op, reason },
             tonic::Code::PermissionDenied => ClientError::PermissionDenied { op, reason },
