@@ -187,11 +187,12 @@ fn rss_mib() -> f64 {
 /// The bench's token (its SHA-256 is in the service's configuration).
 const TOKEN: &str = "fleet-bench-token";
 
+/// Adds the bearer token (if any) to every call.
+type Intercept =
+    Box<dyn FnMut(tonic::Request<()>) -> Result<tonic::Request<()>, tonic::Status> + Send>;
+
 type Client = UavNavClient<
-    tonic::service::interceptor::InterceptedService<
-        tonic::transport::Channel,
-        Box<dyn FnMut(tonic::Request<()>) -> Result<tonic::Request<()>, tonic::Status> + Send>,
-    >,
+    tonic::service::interceptor::InterceptedService<tonic::transport::Channel, Intercept>,
 >;
 
 /// Where the clients connect: plaintext, or TLS trusting `ca` with the bench's token.
@@ -223,13 +224,12 @@ async fn connect(t: &Target) -> Client {
     let token: Option<tonic::metadata::MetadataValue<tonic::metadata::Ascii>> =
         t.ca.as_ref()
             .map(|_| format!("Bearer {TOKEN}").parse().expect("token"));
-    let f: Box<dyn FnMut(tonic::Request<()>) -> Result<tonic::Request<()>, tonic::Status> + Send> =
-        Box::new(move |mut r: tonic::Request<()>| {
-            if let Some(v) = &token {
-                r.metadata_mut().insert("authorization", v.clone());
-            }
-            Ok(r)
-        });
+    let f: Intercept = Box::new(move |mut r: tonic::Request<()>| {
+        if let Some(v) = &token {
+            r.metadata_mut().insert("authorization", v.clone());
+        }
+        Ok(r)
+    });
     UavNavClient::with_interceptor(channel, f).max_encoding_message_size(16 << 20)
 }
 

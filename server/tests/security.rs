@@ -108,24 +108,22 @@ async fn tls_channel(
         .await
 }
 
-type Authed = UavNavClient<
-    tonic::service::interceptor::InterceptedService<
-        Channel,
-        Box<dyn FnMut(tonic::Request<()>) -> Result<tonic::Request<()>, tonic::Status> + Send>,
-    >,
->;
+/// Adds the bearer token (if any) to every call.
+type Intercept =
+    Box<dyn FnMut(tonic::Request<()>) -> Result<tonic::Request<()>, tonic::Status> + Send>;
+
+type Authed = UavNavClient<tonic::service::interceptor::InterceptedService<Channel, Intercept>>;
 
 /// A client that sends `token` (if any) on every call.
 fn with_token(channel: Channel, token: Option<&str>) -> Authed {
     let value: Option<tonic::metadata::MetadataValue<tonic::metadata::Ascii>> =
         token.map(|t| format!("Bearer {t}").parse().unwrap());
-    let f: Box<dyn FnMut(tonic::Request<()>) -> Result<tonic::Request<()>, tonic::Status> + Send> =
-        Box::new(move |mut r: tonic::Request<()>| {
-            if let Some(v) = &value {
-                r.metadata_mut().insert("authorization", v.clone());
-            }
-            Ok(r)
-        });
+    let f: Intercept = Box::new(move |mut r: tonic::Request<()>| {
+        if let Some(v) = &value {
+            r.metadata_mut().insert("authorization", v.clone());
+        }
+        Ok(r)
+    });
     UavNavClient::with_interceptor(channel, f)
 }
 
