@@ -24,9 +24,10 @@
 //!   vehicles and HTTP endpoints (`fleet.rs`), Zenoh keys/queryables/liveliness (`zenoh.rs`),
 //!   shutdown drain and eviction (`shutdown.rs`), configuration precedence (`config_precedence.rs`),
 //!   idle eviction and health periods to the tick on a paused clock (`actor_time.rs`), recording
-//!   (`record.rs`);
+//!   (`record.rs`), TLS, principals and grants on gRPC/HTTP (`security.rs`) and Zenoh
+//!   (`zenoh_security.rs`), admission at the vehicle limit (`admission.rs`);
 //! - `client/tests/`: `library.rs` (the client library over gRPC and Zenoh against an in-process
-//!   server), `recording_reader.rs` (the library's MCAP recording reader on files of the kit's
+//!   server), `secure_service.rs` (the library against the TLS service), `recording_reader.rs` (the library's MCAP recording reader on files of the kit's
 //!   recording builder and of the service's recorder); helpers in `common/`;
 //! - `cli/tests/`: `cli.rs` (each online CLI subcommand against an in-process server, `watch
 //!   --foxglove` included), `loadtest.rs` (the load generator against the service and the discard
