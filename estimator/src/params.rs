@@ -119,6 +119,11 @@ pub struct EstimatorParams {
     /// A magnetometer sample whose inclination (through the filter's tilt) is further than this
     /// from the world magnetic model's is disturbed and not fused, rad.
     pub mag_max_inclination_error_rad: f64,
+    /// A compass heading that contradicts a converged yaw bank (beyond 3σ of both) this long in
+    /// a row stops the compass for the flight and resets the heading to the bank, ns. Long
+    /// against a manoeuvre (a few seconds), short against a flight.
+    pub mag_contradiction_timeout_ns: i64,
+
     /// Heading-course alignment: use the GNSS course as the heading when the yaw estimator has not
     /// converged and the vehicle moves faster than `init_min_speed_mps`. Only right for a vehicle
     /// that flies nose first (a fixed wing); a multirotor flies sideways and backwards, so the
@@ -171,6 +176,8 @@ impl Default for EstimatorParams {
             diverged_pos_sigma_m: 5_000.0,
             mag_heading_sigma_rad: 0.2,
             mag_max_inclination_error_rad: 10f64.to_radians(),
+            mag_contradiction_timeout_ns: 10_000_000_000,
+
             course_heading: false,
             baro_height_sigma_m: 0.5,
             baro_offset_walk_m_per_sqrt_s: 0.1,

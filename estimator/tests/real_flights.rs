@@ -165,7 +165,13 @@ fn trace() {
     let Ok(name) = std::env::var("UAVNAV_TRACE") else {
         return;
     };
-    let Some(dir) = flight_dir(&name) else { return };
+    // A shared flight's name, or the path of any ASL folder.
+    let Some(dir) = flight_dir(&name).or_else(|| {
+        let p = std::path::PathBuf::from(&name);
+        p.join("mav0").is_dir().then_some(p)
+    }) else {
+        return;
+    };
     let f = RealFlight::read(&dir);
     let mut config = f.config.clone();
     if std::env::var("UAVNAV_NO_MAG").is_ok() {
@@ -227,6 +233,14 @@ fn trace() {
             pc[(0, 0)].sqrt(),
         );
         let gsf = e.yaw_estimator().yaw();
+        eprint!(
+            "B {:.0}mG typ {:.0}mG ",
+            f.mag
+                .iter()
+                .find(|m| m.t_ns >= p.t_ns)
+                .map_or(f64::NAN, |m| m.field_t.norm() * 1e7),
+            e.mag_source().typical_strength_t() * 1e7,
+        );
         eprintln!(
             "t {:6.1} yaw {:7.1} ref {:7.1} sig {:5.1} src {:?} mag fused {} rej {} dist {} tr {:.2} gsf {:?} resets {} vel tr {:.2} speed {:.1}",
             (p.t_ns - t0) as f64 * 1e-9,
@@ -244,4 +258,53 @@ fn trace() {
             p.vel_ned_mps.xy().norm(),
         );
     }
+}
+
+/// Scores every ASL folder under `$UAVNAV_SURVEY_DIR` (e.g. further flights converted with
+/// `uavnav convert LOG.BIN DIR/NAME`), one line per flight and profile; asserts nothing but the
+/// σ sanity, which must hold on any input. A way to check that a change generalises beyond the
+/// shared flights: `UAVNAV_SURVEY_DIR=/path cargo test --release -p uavnav-estimator --test
+/// real_flights survey -- --nocapture`.
+#[test]
+fn survey() {
+    let Ok(root) = std::env::var("UAVNAV_SURVEY_DIR") else {
+        return;
+    };
+    let mut dirs: Vec<_> = std::fs::read_dir(&root)
+        .unwrap()
+        .filter_map(|e| Some(e.ok()?.path()))
+        .filter(|d| d.join("mav0").is_dir())
+        .collect();
+    dirs.sort();
+    let profiles: &[FilterProfile] = if std::env::var("UAVNAV_SURVEY_PAPER").is_ok() {
+        &[FilterProfile::Eskf, FilterProfile::Paper]
+    } else {
+        &[FilterProfile::Eskf]
+    };
+    let mut bad = Vec::new();
+    for dir in dirs {
+        let name = dir.file_name().unwrap().to_string_lossy().into_owned();
+        let f = RealFlight::read(&dir);
+        for &profile in profiles {
+            for use_ in [ALL, NO_MAG] {
+                if !use_.mag && f.mag.is_empty() {
+                    continue;
+                }
+                let poses = run(&f, profile, EstimatorParams::default(), use_);
+                let Some(first) = poses.first().map(|p| p.t_ns) else {
+                    eprintln!("{name} {profile:?} mag={}: no pose", use_.mag);
+                    continue;
+                };
+                let s = score(&f, &poses, first + 30 * S, i64::MAX);
+                eprintln!(
+                    "{name} {profile:?} mag={}: {s}",
+                    use_.mag && !f.mag.is_empty()
+                );
+                if s.bad_sigma_rows > 0 {
+                    bad.push(format!("{name} {profile:?}"));
+                }
+            }
+        }
+    }
+    assert!(bad.is_empty(), "rows with a σ of 0, NaN or > 1e6: {bad:?}");
 }

@@ -52,6 +52,12 @@ impl LogError {
         }
     }
 
+    /// Whether the input merely ends inside a message (a log cut short), as opposed to bytes
+    /// that are wrong for the format.
+    pub fn is_cut_tail(&self) -> bool {
+        matches!(self, LogError::Truncated { .. })
+    }
+
     pub(crate) fn corrupt(offset: usize, reason: impl Into<String>) -> Self {
         LogError::Corrupt {
             offset: offset as u64,

@@ -100,8 +100,9 @@ pub struct ImportOptions {
     pub gnss_delay_s: Option<f64>,
     /// Minimum satellites for a kept fix (ArduPilot `NSats`, PX4 `satellites_used`).
     pub min_sats: u32,
-    /// Stop at the first damaged byte and return what came before it (with a note) instead of
-    /// failing: for logs cut by a power loss.
+    /// Stop at the first corrupt byte and return what came before it (with a note) instead of
+    /// failing. A log that merely ends inside a message (cut by a power loss) is always read up
+    /// to its last whole message, with a note naming the byte offset.
     pub stop_at_damage: bool,
 }
 
@@ -191,6 +192,17 @@ pub fn open(
 
 /// Median of a slice (sorted copy; the mean of the middle two for an even count). `None` when
 /// empty.
+/// The import note for where parsing stopped early.
+pub(crate) fn damage_note(e: &LogError) -> String {
+    if e.is_cut_tail() {
+        format!(
+            "the log ends inside a message (cut short, as when the logger loses power): {e}; that partial message dropped, everything before it kept"
+        )
+    } else {
+        format!("stopped at the damage, everything after it dropped: {e}")
+    }
+}
+
 pub(crate) fn median(values: &[f64]) -> Option<f64> {
     let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
     if v.is_empty() {

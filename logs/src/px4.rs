@@ -36,9 +36,7 @@ pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, Log
     let log = ulog::parse(data, opts.stop_at_damage)?;
     let mut notes = Vec::new();
     if let Some(e) = &log.damage {
-        notes.push(format!(
-            "stopped at the damage, everything after it dropped: {e}"
-        ));
+        notes.push(crate::damage_note(e));
     }
     let mut message_counts = BTreeMap::new();
     for t in &log.topics {

@@ -186,8 +186,8 @@ fn flatten(
     Ok(off)
 }
 
-/// Parses a ULog file; with `stop_at_damage`, the first error ends the parse and is kept in
-/// [`ULog::damage`].
+/// Parses a ULog file; a file that ends inside a message, and with `stop_at_damage` any error,
+/// ends the parse with the error kept in [`ULog::damage`].
 pub(crate) fn parse(data: &[u8], stop_at_damage: bool) -> Result<ULog, LogError> {
     let file = Bytes::new(data, 0);
     let head = file.slice(0, HEADER_LEN, "ULog header")?;
@@ -199,7 +199,8 @@ pub(crate) fn parse(data: &[u8], stop_at_damage: bool) -> Result<ULog, LogError>
     while pos < data.len() {
         match st.step(file, pos) {
             Ok(next) => pos = next,
-            Err(e) if stop_at_damage => {
+            // A cut tail keeps what came before it (see `dataflash::parse`).
+            Err(e) if stop_at_damage || e.is_cut_tail() => {
                 st.log.damage = Some(e);
                 break;
             }

@@ -17,8 +17,19 @@
 //! * **off** until a sample arrives; **stopped** for good when the sensor is dead (a field below
 //!   [`DEAD_FIELD_T`] for [`DEAD_SAMPLES`] samples in a row, e.g. a compass reading all zeros);
 //! * a sample is **disturbed** (diagnosed, not fused) when its inclination through the filter's
-//!   tilt is more than `mag_max_inclination_error_rad` from the model's or its strength outside
-//!   [`STRENGTH_RATIO_RANGE`] of the model's;
+//!   tilt is more than `mag_max_inclination_error_rad` from the model's, when its strength is
+//!   implausible against the model's ([`STRENGTH_RATIO_RANGE`], wide: compass scales are often
+//!   far off — 0.15 to 1.8 of the model on public ArduPilot flights), or when it strays more than
+//!   [`STRENGTH_DEVIATION`] from the compass's **own** typical strength (learnt in flight: a
+//!   motor current or a steel structure changes it; a scale error does not), or its inclination
+//!   more than `mag_max_inclination_error_rad` from the compass's own typical inclination; the
+//!   typical inclination may sit off the model's (a hard-iron offset the calibration left) by up
+//!   to [`MAX_STATIC_INCLINATION_ERROR_RAD`] more, and widens the heading σ by as much;
+//! * **aligning**: the heading is taken from the compass only once [`ALIGN_SAMPLES`] consistent
+//!   samples in a row imply the same heading within [`ALIGN_SPREAD_RAD`];
+//! * **stopped** for good, too, when the heading it gives keeps contradicting a converged yaw
+//!   bank (`Eskf::check_mag_against_bank`): a compass that is consistently wrong (a bad
+//!   calibration, a mounting error) must not hold the filter confidently wrong;
 //! * **active**: fused, gated like every source, at most every [`MIN_FUSION_INTERVAL_NS`]: the
 //!   compass's error is time-correlated (calibration, motor current), so fusing every sample
 //!   would average away an error that does not average.
@@ -36,8 +47,21 @@ pub const DEAD_FIELD_T: f64 = 1.0e-6;
 pub const DEAD_SAMPLES: u32 = 20;
 /// Shortest interval between two fused headings, ns.
 pub const MIN_FUSION_INTERVAL_NS: i64 = 500_000_000;
-/// Accepted measured/model strength ratio (calibrations are often off in scale; see module doc).
-pub const STRENGTH_RATIO_RANGE: std::ops::RangeInclusive<f64> = 0.4..=1.8;
+/// Plausible measured/model strength ratio (calibrations are often far off in scale; see module
+/// doc): outside it the compass reads something else (a magnet, a stuck axis).
+pub const STRENGTH_RATIO_RANGE: std::ops::RangeInclusive<f64> = 0.1..=5.0;
+/// Largest relative deviation from the compass's own typical strength for a usable sample.
+pub const STRENGTH_DEVIATION: f64 = 0.25;
+/// Samples that teach the typical strength before the deviation test applies; then it follows
+/// the strength slowly (an exponential average over this many samples).
+pub const STRENGTH_LEARN_SAMPLES: u32 = 50;
+/// Largest static difference between the compass's typical inclination and the model's beyond
+/// `mag_max_inclination_error_rad`, rad: within it the compass is used with a wider heading σ.
+pub const MAX_STATIC_INCLINATION_ERROR_RAD: f64 = 0.35;
+/// Consecutive consistent samples whose headings must agree before the compass sets the heading.
+pub const ALIGN_SAMPLES: usize = 10;
+/// Largest spread of those headings, rad.
+pub const ALIGN_SPREAD_RAD: f64 = 0.087;
 
 /// State of the source.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -47,7 +71,7 @@ pub enum MagState {
     Off,
     /// Fusing (or ready to) heading.
     Active,
-    /// Stopped: the sensor is dead.
+    /// Stopped: the sensor is dead, or its heading contradicts the GNSS-velocity yaw bank.
     Stopped,
 }
 
@@ -77,7 +101,16 @@ pub struct MagHeadingSource {
     pub disturbed: u64,
     /// Why the last sample was not fused.
     pub last_skip: MagSkip,
+    /// Whether the source was stopped because its heading contradicted the yaw bank.
+    pub contradicted: bool,
     dead_run: u32,
+    /// The compass's own typical strength, T, and inclination, rad (0 until learnt), and the
+    /// samples behind them.
+    typical_t: f64,
+    typical_incl_rad: f64,
+    learnt: u32,
+    /// Headings implied by the latest consistent samples while aligning.
+    align: Vec<f64>,
 }
 
 impl Default for MagHeadingSource {
@@ -87,7 +120,12 @@ impl Default for MagHeadingSource {
             state: MagState::Off,
             disturbed: 0,
             last_skip: MagSkip::None,
+            contradicted: false,
             dead_run: 0,
+            typical_t: 0.0,
+            typical_incl_rad: 0.0,
+            learnt: 0,
+            align: Vec::new(),
         }
     }
 }
@@ -142,9 +180,14 @@ impl MagHeadingSource {
         true
     }
 
-    /// Whether the sample's direction and strength agree with the model through the current tilt.
+    /// Whether the sample agrees with the compass's own typical field (strength, and inclination
+    /// through the current tilt), which is learnt here and follows slow changes; a sample that
+    /// strays from it is disturbed (motor current, steel nearby). The model bounds plausibility
+    /// only: a typical inclination up to [`MAX_STATIC_INCLINATION_ERROR_RAD`] off the model's (a
+    /// hard-iron offset left by the calibration) is a static error the heading σ absorbs
+    /// ([`Self::static_sigma_rad`]), not a reason to ignore the compass.
     pub fn consistent(
-        &self,
+        &mut self,
         x: &Nominal,
         m_b: &Vector3<f64>,
         model_field: &MagneticField,
@@ -152,9 +195,73 @@ impl MagHeadingSource {
     ) -> bool {
         let m = x.q.transform_vector(m_b);
         let incl = m.z.atan2(m.xy().norm());
-        let ratio = m.norm() / model_field.strength_t().max(1e-9);
-        (incl - model_field.inclination_rad()).abs() <= max_incl_err_rad
-            && STRENGTH_RATIO_RANGE.contains(&ratio)
+        let strength = m.norm();
+        let ratio = strength / model_field.strength_t().max(1e-9);
+        if !STRENGTH_RATIO_RANGE.contains(&ratio)
+            || (incl - model_field.inclination_rad()).abs()
+                > MAX_STATIC_INCLINATION_ERROR_RAD + max_incl_err_rad
+        {
+            return false;
+        }
+        let ok = self.learnt < STRENGTH_LEARN_SAMPLES
+            || ((strength / self.typical_t - 1.0).abs() <= STRENGTH_DEVIATION
+                && (incl - self.typical_incl_rad).abs() <= max_incl_err_rad);
+        self.learnt = self.learnt.saturating_add(1);
+        let k = 1.0 / f64::from(self.learnt.min(STRENGTH_LEARN_SAMPLES));
+        self.typical_t += k * (strength - self.typical_t);
+        self.typical_incl_rad += k * (incl - self.typical_incl_rad);
+        let static_ok = (self.typical_incl_rad - model_field.inclination_rad()).abs()
+            <= MAX_STATIC_INCLINATION_ERROR_RAD;
+        ok && static_ok
+    }
+
+    /// The heading σ a static inclination error adds, rad: a hard-iron offset that tilts the
+    /// field by δ turns the heading by up to about δ once the vehicle banks.
+    pub fn static_sigma_rad(&self, model_field: &MagneticField, max_incl_err_rad: f64) -> f64 {
+        if self.learnt == 0 {
+            return 0.0;
+        }
+        let d = (self.typical_incl_rad - model_field.inclination_rad()).abs();
+        (d - max_incl_err_rad).max(0.0)
+    }
+
+    /// The compass's typical strength learnt so far, T (0 before the first usable sample).
+    pub fn typical_strength_t(&self) -> f64 {
+        self.typical_t
+    }
+
+    /// Feeds the heading a consistent sample implies while aligning; returns the heading to take
+    /// once [`ALIGN_SAMPLES`] in a row agree within [`ALIGN_SPREAD_RAD`] (their circular mean).
+    pub fn align_with(&mut self, heading_rad: f64) -> Option<f64> {
+        self.align.push(heading_rad);
+        if self.align.len() > ALIGN_SAMPLES {
+            self.align.remove(0);
+        }
+        if self.align.len() < ALIGN_SAMPLES {
+            return None;
+        }
+        let (s, c) = self
+            .align
+            .iter()
+            .fold((0.0, 0.0), |(s, c), a| (s + a.sin(), c + a.cos()));
+        let mean = s.atan2(c);
+        let spread = self
+            .align
+            .iter()
+            .map(|a| wrap_pi(a - mean).abs())
+            .fold(0.0, f64::max);
+        (spread <= ALIGN_SPREAD_RAD).then_some(mean)
+    }
+
+    /// Forgets the alignment samples (an inconsistent sample breaks the run).
+    pub fn align_break(&mut self) {
+        self.align.clear();
+    }
+
+    /// Stops the source for good: its heading contradicts the GNSS-velocity yaw bank.
+    pub fn stop_contradicted(&mut self) {
+        self.state = MagState::Stopped;
+        self.contradicted = true;
     }
 
     /// Fuses one sample (body frame) at the horizon; returns the correction, if any.
@@ -212,5 +319,104 @@ impl MagHeadingSource {
                 None
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::UnitQuaternion;
+
+    /// A level vehicle heading north and a field of 22 µT north, 36 µT down (inclination 58.6°).
+    fn setup() -> (Nominal, MagneticField) {
+        let x = Nominal {
+            t_ns: 0,
+            p: Vector3::zeros(),
+            v: Vector3::zeros(),
+            q: UnitQuaternion::identity(),
+            bg: Vector3::zeros(),
+            ba: Vector3::zeros(),
+            gm: Vector3::zeros(),
+            clone: None,
+        };
+        (
+            x,
+            MagneticField {
+                ned_t: Vector3::new(22e-6, 0.0, 36e-6),
+            },
+        )
+    }
+
+    const INCL: f64 = 0.1745;
+
+    #[test]
+    fn a_compass_off_the_models_strength_is_used_and_its_own_strength_learnt() {
+        let (x, field) = setup();
+        let mut src = MagHeadingSource::default();
+        // 1.8 × the model (a scale the calibration left): consistent throughout
+        for _ in 0..100 {
+            assert!(src.consistent(&x, &(field.ned_t * 1.8), &field, INCL));
+        }
+        assert!((src.typical_strength_t() / (field.strength_t() * 1.8) - 1.0).abs() < 1e-9);
+        // a sample 40 % stronger than the compass's own typical field is disturbed
+        assert!(!src.consistent(&x, &(field.ned_t * 1.8 * 1.4), &field, INCL));
+        // implausible against the model (a magnet): disturbed from the first sample
+        let mut fresh = MagHeadingSource::default();
+        assert!(!fresh.consistent(&x, &(field.ned_t * 8.0), &field, INCL));
+    }
+
+    #[test]
+    fn a_static_inclination_error_widens_the_heading_sigma_instead_of_stopping_the_compass() {
+        let (x, field) = setup();
+        // 17° steeper than the model, as a hard-iron offset along the body z axis leaves it
+        let tilted = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 17f64.to_radians())
+            .transform_vector(&field.ned_t);
+        let mut src = MagHeadingSource::default();
+        for _ in 0..60 {
+            assert!(src.consistent(&x, &tilted, &field, INCL));
+        }
+        let extra = src.static_sigma_rad(&field, INCL);
+        assert!(
+            (extra - (17f64.to_radians() - INCL)).abs() < 0.01,
+            "{}",
+            extra.to_degrees()
+        );
+        // beyond the static bound: never consistent
+        let far = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 35f64.to_radians())
+            .transform_vector(&field.ned_t);
+        let mut src = MagHeadingSource::default();
+        assert!(!src.consistent(&x, &far, &field, INCL));
+    }
+
+    #[test]
+    fn alignment_needs_agreeing_samples() {
+        let mut src = MagHeadingSource::default();
+        for k in 0..ALIGN_SAMPLES - 1 {
+            assert_eq!(src.align_with(1.0 + 0.001 * k as f64), None);
+        }
+        let yaw = src.align_with(1.0).expect("aligned");
+        assert!((yaw - 1.004).abs() < 0.01, "{yaw}");
+        // a spread wider than ALIGN_SPREAD_RAD never aligns, and a break starts over
+        let mut src = MagHeadingSource::default();
+        for k in 0..3 * ALIGN_SAMPLES {
+            let a = if k % 2 == 0 { 0.0 } else { 0.3 };
+            assert_eq!(src.align_with(a), None);
+        }
+        src.align_break();
+        assert_eq!(src.align_with(0.0), None);
+    }
+
+    #[test]
+    fn a_contradicted_compass_stays_stopped() {
+        let (x, field) = setup();
+        let mut src = MagHeadingSource::default();
+        assert!(src.check_alive(&field.ned_t));
+        src.stop_contradicted();
+        assert!(src.contradicted);
+        assert!(!src.check_alive(&field.ned_t));
+        let mut p = Cov::identity() * 0.01;
+        let fused = src.fuse(&x, &mut p, &field.ned_t, &field, 0.2, INCL, 3.29, 1_000);
+        assert!(fused.is_none());
+        assert_eq!(src.state, MagState::Stopped);
     }
 }

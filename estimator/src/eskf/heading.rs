@@ -25,6 +25,10 @@ pub enum HeadingSource {
     Course,
 }
 
+/// Smallest heading disagreement between the compass and the yaw bank that counts as a
+/// contradiction, rad: below it the two agree as well as compasses do.
+pub const MAG_CONTRADICTION_MIN_RAD: f64 = 0.79;
+
 /// UNIX time of 2000-01-01, ns: stamps before it are on another clock (time since boot), and the
 /// date for the magnetic model is unknown.
 const UNIX_2000_NS: i64 = 946_684_800_000_000_000;
@@ -66,6 +70,10 @@ impl Eskf {
             }
             return;
         }
+        if mag_active {
+            self.check_mag_against_bank(m.t_ns, gsf);
+        }
+        let mag_active = self.mag.state == MagState::Active && self.mag.diag.fused > 0;
         // The bank sees the heading only through the velocity, as the main filter does when the
         // antenna sits on the IMU and no camera is fitted; a lever arm or a camera tells the main
         // filter more than the bank knows.
@@ -103,6 +111,44 @@ impl Eskf {
                 self.corrected = true;
             }
         }
+    }
+
+    /// A compass can be consistently wrong — a bad calibration or mounting, a field bent by the
+    /// airframe — while its direction and strength look plausible (on public ArduPilot copters its
+    /// heading strays 40° from the autopilot's on one flight), and heading fusion then holds the
+    /// filter confidently wrong. The yaw bank sees the heading independently, through the GNSS
+    /// velocity: when it has converged and the two disagree beyond 3σ of their combined
+    /// uncertainty (and by more than [`MAG_CONTRADICTION_MIN_RAD`]) for
+    /// `mag_contradiction_timeout_ns` in a row, the compass is stopped for the flight and the
+    /// heading taken from the bank (counted in `yaw_resets`, shown by the mag source's state).
+    fn check_mag_against_bank(&mut self, t_ns: i64, gsf: Option<(f64, f64)>) {
+        let (Some((yaw, sigma)), Some(x)) = (gsf, self.x.as_mut()) else {
+            self.mag_contradicted_since_ns = None;
+            return;
+        };
+        let (_, _, cur) = x.q.euler_angles();
+        let d = (yaw - cur + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+            - std::f64::consts::PI;
+        let s = (self.p[(ITH + 2, ITH + 2)] + sigma * sigma).sqrt();
+        if d.abs() <= (3.0 * s).max(MAG_CONTRADICTION_MIN_RAD) {
+            self.mag_contradicted_since_ns = None;
+            return;
+        }
+        let since = *self.mag_contradicted_since_ns.get_or_insert(t_ns);
+        if t_ns - since < self.params.mag_contradiction_timeout_ns {
+            return;
+        }
+        self.mag.stop_contradicted();
+        set_yaw(
+            x,
+            &mut self.p,
+            yaw,
+            sigma.max(self.params.init_yaw_sigma_rad * 0.5),
+        );
+        self.heading = HeadingSource::YawEstimator;
+        self.yaw_resets += 1;
+        self.corrected = true;
+        self.mag_contradicted_since_ns = None;
     }
 
     /// Without a magnetometer the heading is seen only through the GNSS velocity while the vehicle
@@ -163,19 +209,23 @@ impl Eskf {
             return;
         };
         let Some(x) = self.x else { return };
-        let sigma = self.params.mag_heading_sigma_rad.hypot(extra);
+        let sigma = self.params.mag_heading_sigma_rad.hypot(extra).hypot(
+            self.mag
+                .static_sigma_rad(&field, self.params.mag_max_inclination_error_rad),
+        );
         if !self.yaw_aligned {
             if !self.mag.check_alive(m_b)
                 || !self
                     .mag
                     .consistent(&x, m_b, &field, self.params.mag_max_inclination_error_rad)
             {
+                self.mag.align_break();
                 return;
             }
-            if let (Some(yaw), Some(xm)) = (
-                heading_from_field(&x, m_b, field.declination_rad()),
-                self.x.as_mut(),
-            ) {
+            let Some(implied) = heading_from_field(&x, m_b, field.declination_rad()) else {
+                return;
+            };
+            if let (Some(yaw), Some(xm)) = (self.mag.align_with(implied), self.x.as_mut()) {
                 set_yaw(xm, &mut self.p, yaw, sigma * 2.0);
                 self.yaw_aligned = true;
                 self.heading = HeadingSource::Magnetometer;

@@ -87,6 +87,8 @@ pub struct Eskf {
     course_heading: bool,
     /// Heading resets from the yaw estimator after alignment.
     pub yaw_resets: u32,
+    /// Since when the magnetometer-held heading has contradicted the converged yaw bank.
+    mag_contradicted_since_ns: Option<i64>,
     vision: VisionSource,
     out: OutputPredictor,
     late_dropped: u64,
@@ -151,6 +153,7 @@ impl Eskf {
             course_heading: params.course_heading
                 || config.airframe == uavnav_core::Airframe::FixedWing,
             yaw_resets: 0,
+            mag_contradicted_since_ns: None,
             vision: VisionSource::default(),
             out: OutputPredictor::new(),
             late_dropped: 0,

@@ -81,8 +81,9 @@ pub struct ReadArgs {
     /// logged stamps; the estimator subtracts the delay.
     #[arg(long, value_name = "SECONDS")]
     pub gnss_delay_s: Option<f64>,
-    /// Flight logs: import what comes before the first damaged byte (a log cut by a power loss)
-    /// instead of failing with the byte offset.
+    /// Flight logs: import what comes before the first corrupt byte instead of failing with the
+    /// byte offset. A log that merely ends inside a message (cut by a power loss) is always read
+    /// up to its last whole message, with a note on stderr.
     #[arg(long)]
     pub stop_at_damage: bool,
 }
