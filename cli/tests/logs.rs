@@ -200,12 +200,13 @@ fn estimate_a_real_log_with_a_report_against_the_autopilot_reference() {
 }
 
 #[test]
-fn a_cut_log_is_refused_with_its_byte_offset() {
+fn a_cut_log_imports_with_a_note_and_a_corrupt_one_is_refused_with_its_byte_offset() {
     let Some(root) = uavnav_tests::shared_data("real_flights") else {
         return;
     };
     let data = std::fs::read(root.join("raw/erle_copter_218.BIN")).expect("log");
     let dir = tempfile::tempdir().expect("tempdir");
+    // cut mid-message (the logger lost power): what came before is imported, with a note
     let cut = dir.path().join("cut.BIN");
     std::fs::write(&cut, &data[..1_000_003]).expect("write");
     let out = run(&[
@@ -214,8 +215,34 @@ fn a_cut_log_is_refused_with_its_byte_offset() {
         "--out",
         dir.path().join("x").to_str().expect("path"),
     ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert!(
+        err.contains("cut.BIN") && err.contains("ends inside a message") && err.contains("at byte"),
+        "{err}"
+    );
+    assert!(dir.path().join("x/mav0/imu0/data.csv").is_file());
+    // a message header destroyed in the middle: refused, one line naming the byte offset
+    let mut bad = data.clone();
+    let at = 1_000_000
+        + bad[1_000_000..]
+            .windows(2)
+            .position(|w| w == [0xA3, 0x95])
+            .expect("a message header");
+    bad[at] = 0;
+    let corrupt = dir.path().join("corrupt.BIN");
+    std::fs::write(&corrupt, &bad).expect("write");
+    let out = run(&[
+        "convert",
+        corrupt.to_str().expect("path"),
+        "--out",
+        dir.path().join("y").to_str().expect("path"),
+    ]);
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("cut.BIN") && err.contains("at byte"), "{err}");
+    assert!(
+        err.contains("corrupt.BIN") && err.contains(&format!("at byte {at}")),
+        "{err}"
+    );
     assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
 }
