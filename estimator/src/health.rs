@@ -37,6 +37,9 @@ pub struct Health {
     pub vision_no_clone: u64,
     /// GNSS inflate-and-fuse resets.
     pub gnss_resets: u32,
+    /// IMU intervals with a clipped (saturated) accelerometer or gyro axis (`eskf`; handled by
+    /// extra process noise).
+    pub imu_clipped: u64,
     /// Covariance diagonal of the error state (layout: [`crate::state::STATE_LABELS`] for `eskf`;
     /// the paper profile fills p, v, attitude and leaves the rest 0).
     pub cov_diag: [f64; crate::state::N],
@@ -58,6 +61,7 @@ impl Default for Health {
             late_dropped: 0,
             vision_no_clone: 0,
             gnss_resets: 0,
+            imu_clipped: 0,
             cov_diag: [0.0; crate::state::N],
         }
     }

@@ -12,10 +12,20 @@ pub struct EstimatorParams {
     pub cov_period_s: f64,
     /// Largest accepted gap between consecutive IMU samples, ns; larger gaps are rejected.
     pub max_imu_gap_ns: i64,
-    /// Largest accepted |specific force|, m/s² (absurd-value check).
+    /// Largest accepted |specific force|, m/s² (absurd-value check). 64 g: above any MEMS range
+    /// (±16–32 g) even with all three axes at full scale, so a clipped sample is handled as one
+    /// (`imu_accel_clip_mps2`), not refused.
     pub max_accel_mps2: f64,
-    /// Largest accepted |angular rate|, rad/s.
+    /// Largest accepted |angular rate|, rad/s (absurd-value check; 2 × a ±2000 °/s range).
     pub max_gyro_radps: f64,
+    /// An accelerometer axis at or beyond this is clipped, m/s²: 15.5 g, just under the ±16 g
+    /// range most autopilot IMUs use. A clipped sample understates the specific force by an
+    /// unknown amount, so its interval gets [`crate::eskf::CLIP_ACCEL_SIGMA_MPS2`] of extra
+    /// process noise and is counted in [`crate::Health::imu_clipped`]. An axis that repeats the
+    /// same reading above 2 g is clipped too, whatever the range.
+    pub imu_accel_clip_mps2: f64,
+    /// A gyro axis at or beyond this is clipped, rad/s (0.98 × 2000 °/s).
+    pub imu_gyro_clip_radps: f64,
     /// Measurements older than this behind the newest IMU sample are refused, ns.
     pub max_measurement_age_ns: i64,
     /// Accelerometer averaging window for levelling at initialisation, s.
@@ -148,8 +158,10 @@ impl Default for EstimatorParams {
             fusion_delay_ns: 200_000_000,
             cov_period_s: 0.01,
             max_imu_gap_ns: 500_000_000,
-            max_accel_mps2: 16.0 * 9.81,
-            max_gyro_radps: 35.0,
+            max_accel_mps2: 64.0 * 9.81,
+            max_gyro_radps: 70.0,
+            imu_accel_clip_mps2: 15.5 * 9.81,
+            imu_gyro_clip_radps: 0.98 * 2000f64.to_radians(),
             max_measurement_age_ns: 2_000_000_000,
             init_level_window_s: 0.5,
             init_min_speed_mps: 3.0,

@@ -493,3 +493,30 @@ fn msl_altitudes_are_made_ellipsoidal_with_the_geoid() {
     let wrong = run(&vc, true);
     assert!((wrong.lla.alt_m - ellipsoidal.lla.alt_m + n).abs() < 0.5);
 }
+
+/// A hard landing on a ±16 g accelerometer: 0.1 s of samples with one axis saturated (and two
+/// axes at full scale, |a| ≈ 22 g). They are taken, not refused as absurd, counted as clipped in
+/// health, and the velocity σ grows to cover what the saturated axis missed.
+#[test]
+fn clipped_imu_samples_are_taken_counted_and_widen_the_velocity_sigma() {
+    let (cfg, origin, mut imu, gnss, _) = static_data(30.0, 3);
+    let full_scale = 16.0 * 9.80665;
+    let burst = 20 * 200..20 * 200 + 20; // 0.1 s at 200 Hz, 20 s in
+    let mut clean = Estimator::new(&cfg, EstimatorParams::default(), Some(origin));
+    let clean_out = feed(&mut clean, &imu[..burst.end + 100], &gnss);
+    for s in &mut imu[burst.clone()] {
+        s.accel_mps2 = Vector3::new(full_scale, -full_scale, s.accel_mps2.z);
+    }
+    let mut est = Estimator::new(&cfg, EstimatorParams::default(), Some(origin));
+    let out = feed(&mut est, &imu[..burst.end + 100], &gnss);
+    let h = est.health();
+    assert_eq!(h.inputs_rejected, 0, "{h:?}");
+    assert!(h.imu_clipped >= 19, "{}", h.imu_clipped);
+    let (a, b) = (clean_out.last().unwrap(), out.last().unwrap());
+    assert!(
+        b.sigma_vel_mps.xy().norm() > 2.0 * a.sigma_vel_mps.xy().norm(),
+        "clipped σ {:?} vs clean {:?}",
+        b.sigma_vel_mps,
+        a.sigma_vel_mps
+    );
+}

@@ -87,6 +87,8 @@ pub struct Eskf {
     course_heading: bool,
     /// Heading resets from the yaw estimator after alignment.
     pub yaw_resets: u32,
+    /// IMU intervals with a clipped axis.
+    imu_clipped: u64,
     /// Since when the magnetometer-held heading has contradicted the converged yaw bank.
     mag_contradicted_since_ns: Option<i64>,
     vision: VisionSource,
@@ -94,6 +96,31 @@ pub struct Eskf {
     late_dropped: u64,
     corrected: bool,
     lla: Option<crate::output::LlaLinearizer>,
+}
+
+/// 1-σ of the specific force a clipped accelerometer axis may have missed, m/s² (PX4 uses
+/// 4.9 m/s² of accelerometer noise for bad-accelerometer intervals; clipping is worse).
+pub const CLIP_ACCEL_SIGMA_MPS2: f64 = 10.0;
+/// 1-σ of the rate a clipped gyro axis may have missed, rad/s.
+pub const CLIP_GYRO_SIGMA_RADPS: f64 = 1.0;
+
+/// Whether the interval `a`–`b` has a clipped accelerometer / gyro axis: at or beyond the
+/// configured clip level at `b`, or the same non-small reading repeated exactly (a saturated
+/// axis reads its full-scale value; a live axis never repeats to the last bit above 2 g / 3 rad/s).
+pub fn clipped(a: &ImuSample, b: &ImuSample, p: &EstimatorParams) -> (bool, bool) {
+    let axis = |va: f64, vb: f64, clip: f64, plateau: f64| {
+        vb.abs() >= clip || (vb == va && vb.abs() > plateau)
+    };
+    let accel = (0..3).any(|k| {
+        axis(
+            a.accel_mps2[k],
+            b.accel_mps2[k],
+            p.imu_accel_clip_mps2,
+            2.0 * 9.81,
+        )
+    });
+    let gyro = (0..3).any(|k| axis(a.gyro_radps[k], b.gyro_radps[k], p.imu_gyro_clip_radps, 3.0));
+    (accel, gyro)
 }
 
 /// Linear interpolation of two IMU samples at `t_ns`.
@@ -154,6 +181,7 @@ impl Eskf {
                 || config.airframe == uavnav_core::Airframe::FixedWing,
             yaw_resets: 0,
             mag_contradicted_since_ns: None,
+            imu_clipped: 0,
             vision: VisionSource::default(),
             out: OutputPredictor::new(),
             late_dropped: 0,
@@ -386,6 +414,18 @@ impl Eskf {
         let da = (b.accel_mps2 - a.accel_mps2).norm_squared();
         self.acc.gyro_var += dg * dt_s * dt_s / 6.0;
         self.acc.accel_var += da * dt_s * dt_s / 6.0;
+        let (accel_clipped, gyro_clipped) = clipped(a, b, &self.params);
+        if accel_clipped || gyro_clipped {
+            self.imu_clipped += 1;
+        }
+        // What a clipped axis missed is unknown but large: PX4 and ArduPilot inflate the same way
+        // rather than drop the sample (dropping loses the part that was measured).
+        if accel_clipped {
+            self.acc.accel_var += 3.0 * (CLIP_ACCEL_SIGMA_MPS2 * dt_s).powi(2);
+        }
+        if gyro_clipped {
+            self.acc.gyro_var += 3.0 * (CLIP_GYRO_SIGMA_RADPS * dt_s).powi(2);
+        }
     }
 
     /// Propagates the covariance over the accumulated interval.

@@ -58,6 +58,7 @@ impl Eskf {
             late_dropped: self.late_dropped,
             vision_no_clone: self.vision.no_clone,
             gnss_resets: self.gnss_pos.resets + self.gnss_vel.resets,
+            imu_clipped: self.imu_clipped,
             cov_diag,
         }
     }
