@@ -94,23 +94,34 @@ impl Eskf {
         if mag_active || rejected_for < self.params.yaw_reset_timeout_ns {
             return;
         }
-        if let (Some((yaw, sigma)), Some(x)) = (gsf, self.x.as_mut()) {
-            let (_, _, cur) = x.q.euler_angles();
-            let d = (yaw - cur + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
-                - std::f64::consts::PI;
-            let s = (self.p[(ITH + 2, ITH + 2)] + sigma * sigma).sqrt();
-            if d.abs() > 3.0 * s {
-                set_yaw(
-                    x,
-                    &mut self.p,
-                    yaw,
-                    sigma.max(self.params.init_yaw_sigma_rad * 0.5),
-                );
-                self.heading = HeadingSource::YawEstimator;
-                self.yaw_resets += 1;
-                self.corrected = true;
-            }
+        if let Some(bank) = gsf
+            && let Some((d, s)) = self.disagreement_with(bank)
+            && d.abs() > 3.0 * s
+        {
+            self.reset_yaw_to(bank);
         }
+    }
+
+    /// The filter's yaw minus the bank's `(yaw, σ)` (wrapped), and the σ of that difference.
+    fn disagreement_with(&self, (yaw, sigma): (f64, f64)) -> Option<(f64, f64)> {
+        let (_, _, cur) = self.x.as_ref()?.q.euler_angles();
+        let d = (yaw - cur + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+            - std::f64::consts::PI;
+        Some((d, (self.p[(ITH + 2, ITH + 2)] + sigma * sigma).sqrt()))
+    }
+
+    /// Resets the heading to the bank's `(yaw, σ)` (counted in `yaw_resets`).
+    fn reset_yaw_to(&mut self, (yaw, sigma): (f64, f64)) {
+        let Some(x) = self.x.as_mut() else { return };
+        set_yaw(
+            x,
+            &mut self.p,
+            yaw,
+            sigma.max(self.params.init_yaw_sigma_rad * 0.5),
+        );
+        self.heading = HeadingSource::YawEstimator;
+        self.yaw_resets += 1;
+        self.corrected = true;
     }
 
     /// A compass can be consistently wrong — a bad calibration or mounting, a field bent by the
@@ -122,14 +133,10 @@ impl Eskf {
     /// `mag_contradiction_timeout_ns` in a row, the compass is stopped for the flight and the
     /// heading taken from the bank (counted in `yaw_resets`, shown by the mag source's state).
     fn check_mag_against_bank(&mut self, t_ns: i64, gsf: Option<(f64, f64)>) {
-        let (Some((yaw, sigma)), Some(x)) = (gsf, self.x.as_mut()) else {
+        let Some((bank, (d, s))) = gsf.and_then(|b| Some((b, self.disagreement_with(b)?))) else {
             self.mag_contradicted_since_ns = None;
             return;
         };
-        let (_, _, cur) = x.q.euler_angles();
-        let d = (yaw - cur + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
-            - std::f64::consts::PI;
-        let s = (self.p[(ITH + 2, ITH + 2)] + sigma * sigma).sqrt();
         if d.abs() <= (3.0 * s).max(MAG_CONTRADICTION_MIN_RAD) {
             self.mag_contradicted_since_ns = None;
             return;
@@ -139,15 +146,7 @@ impl Eskf {
             return;
         }
         self.mag.stop_contradicted();
-        set_yaw(
-            x,
-            &mut self.p,
-            yaw,
-            sigma.max(self.params.init_yaw_sigma_rad * 0.5),
-        );
-        self.heading = HeadingSource::YawEstimator;
-        self.yaw_resets += 1;
-        self.corrected = true;
+        self.reset_yaw_to(bank);
         self.mag_contradicted_since_ns = None;
     }
 
