@@ -18,7 +18,7 @@ use std::time::Instant;
 use uavnav_proto::v1 as pb;
 use uavnavd::ingest::Payload;
 use uavnavd::metrics::Transport;
-use uavnavd::security::{Access, Authorizer, Grant, PrincipalConfig, Verb};
+use uavnavd::security::{Access, AuthTransport, Authorizer, Grant, PrincipalConfig, Verb};
 use uavnavd::service::Service;
 
 const N: usize = 200_000;
@@ -84,7 +84,7 @@ fn main() {
         .unwrap();
     rt.block_on(async {
         let (secured, _stop1) = service(std::slice::from_ref(&alpha));
-        let access = secured.authenticate("grpc", &["gs-alpha".into()], None).unwrap();
+        let access = secured.authenticate(AuthTransport::Grpc, &["gs-alpha".into()], None).unwrap();
         let (open, _stop2) = service(&[]);
         // Warm up: the vehicles exist, their actors run.
         let _ = per_message(&secured, &access, "alpha-1", 1_000).await;
@@ -112,7 +112,7 @@ fn main() {
         }
         let t0 = Instant::now();
         for _ in 0..N {
-            let _ = secured.authenticate("grpc", &["gs-alpha".into()], Some(b"Bearer not-a-token"));
+            let _ = secured.authenticate(AuthTransport::Grpc, &["gs-alpha".into()], Some(b"Bearer not-a-token"));
         }
         println!(
             "| (one call's authentication: certificate and a bad token) | on | {:.0} | Unauthenticated |",
