@@ -18,7 +18,7 @@ pub mod refusals;
 pub mod tls;
 pub mod zenoh;
 
-use std::net::{IpAddr, SocketAddr};
+use std::net::SocketAddr;
 use std::path::PathBuf;
 
 use prometheus_client::encoding::EncodeLabelSet;
@@ -26,6 +26,7 @@ use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::family::Family;
 use prometheus_client::registry::Registry;
 use serde::Deserialize;
+use uavnav_proto::net::is_loopback_host;
 
 pub use auth::{Access, AuthError, Authorizer, Grant, PrincipalConfig, Verb};
 pub use refusals::{ANONYMOUS, Refusals};
@@ -203,12 +204,6 @@ pub struct Listener {
     pub loopback: bool,
     /// Whether it speaks TLS.
     pub tls: bool,
-}
-
-/// Whether `host` (an IP, `[v6]`, or a name) is a loopback address.
-pub fn is_loopback_host(host: &str) -> bool {
-    let h = host.trim_start_matches('[').trim_end_matches(']');
-    h.eq_ignore_ascii_case("localhost") || h.parse::<IpAddr>().is_ok_and(|ip| ip.is_loopback())
 }
 
 /// The host of a Zenoh locator `proto/HOST:PORT[?…][#…]`.
