@@ -67,9 +67,49 @@ pub async fn connect(uri: &str, opts: &ConnectOptions) -> Result<RawClient, Clie
         Ok(Err(e)) => return Err(err(source_chain(&e))),
         Err(_) => return Err(err(format!("no connection within {connect_timeout:?}"))),
     };
+    if !tls && speaks_tls(ep.uri(), connect_timeout.min(TLS_PROBE_WAIT)).await {
+        return Err(ClientError::Tls {
+            reason: format!(
+                "{endpoint} answers HTTP/2 in clear with a TLS alert: the service speaks TLS, \
+                 use {} with the CA that signed its certificate (--tls-ca)",
+                endpoint.replacen("grpc://", "grpcs://", 1)
+            ),
+        });
+    }
     Ok(UavNavClient::with_interceptor(channel, interceptor)
         .max_decoding_message_size(MAX_MESSAGE_BYTES)
         .max_encoding_message_size(MAX_MESSAGE_BYTES))
+}
+
+/// How long the plaintext probe waits for the server's first bytes.
+const TLS_PROBE_WAIT: Duration = Duration::from_secs(1);
+
+/// The HTTP/2 client preface and an empty SETTINGS frame: how a plaintext gRPC client opens.
+const H2_PREFACE: &[u8] = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n\0\0\0\x04\0\0\0\0\0";
+
+/// Whether the server at `uri` answers a plaintext HTTP/2 opening the way a TLS server does: with
+/// an alert record (content type 21, version 3.x). An HTTP/2 server answers with its SETTINGS
+/// frame (first byte 0, the top of a small length).
+///
+/// Why a probe: tonic connects without waiting for the server's first bytes, and a request on a
+/// connection the TLS server then closes fails with a bare "transport error" that looks transient,
+/// so a `grpc://` client pointed at a TLS port would retry for its whole backoff. One extra
+/// connection at connect time names the cause instead. `false` when unsure (no answer within
+/// `wait`, a closed or reset connection): the usual errors then tell what happened.
+async fn speaks_tls(uri: &tonic::codegen::http::Uri, wait: Duration) -> bool {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let (Some(host), Some(port)) = (uri.host(), uri.port_u16()) else {
+        return false;
+    };
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    let probe = async {
+        let mut s = tokio::net::TcpStream::connect((host, port)).await.ok()?;
+        s.write_all(H2_PREFACE).await.ok()?;
+        let mut first = [0u8; 2];
+        s.read_exact(&mut first).await.ok()?;
+        Some(first == [0x15, 0x03])
+    };
+    matches!(tokio::time::timeout(wait, probe).await, Ok(Some(true)))
 }
 
 /// `e` and its causes, joined (tonic's top-level message alone is "transport error").

@@ -1,6 +1,7 @@
 //! The client library against the real service with TLS and grants (issue 20): a ground station
-//! with its certificate gets in; without a certificate the call fails at once with a TLS error
-//! (not retried: no new connection can fix it); outside its grant it gets `PermissionDenied`.
+//! with its certificate gets in; without a certificate, or in clear (`grpc://`) to the TLS port,
+//! the call fails at once with a TLS error (not retried: no new connection can fix it); outside
+//! its grant it gets `PermissionDenied`.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use std::time::{Duration, Instant};
@@ -52,12 +53,14 @@ async fn tls_refusals_fail_fast_and_grants_hold() {
     let e = ok.reset("bravo-1").await.unwrap_err();
     assert!(matches!(e, ClientError::PermissionDenied { .. }), "{e:?}");
 
-    // Without a certificate: a TLS error, fast. (Plaintext to the TLS port is refused too, but
-    // tonic reports it as a bare "transport error", which the client still retries.)
-    for (url, tls) in [(
-        format!("grpcs://localhost:{port}"),
-        Some(TlsOptions::with_ca(&pki.ca)),
-    )] {
+    // Without a certificate, and in clear: a TLS error, fast.
+    for (url, tls) in [
+        (
+            format!("grpcs://localhost:{port}"),
+            Some(TlsOptions::with_ca(&pki.ca)),
+        ),
+        (format!("grpc://localhost:{port}"), None),
+    ] {
         let t0 = Instant::now();
         let r = match Client::connect(&url.parse().unwrap(), opts(tls)).await {
             Err(e) => Err(e),
@@ -73,6 +76,12 @@ async fn tls_refusals_fail_fast_and_grants_hold() {
             "{url}: refused after {:?}",
             t0.elapsed()
         );
+        if url.starts_with("grpc://") {
+            assert!(
+                matches!(&e, ClientError::Tls { reason } if reason.contains("use grpcs://localhost")),
+                "{url}: {e}"
+            );
+        }
     }
     server.shutdown().await.unwrap();
 }

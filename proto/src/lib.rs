@@ -15,6 +15,7 @@
 //! | [`wire`] | counting a repeated field's entries in encoded bytes without decoding them |
 //! | [`input`] | [`input::InputRef`], one sensor input borrowed (the service's ingest path, the recorders' MCAP layout) |
 //! | [`keys`] | the service's Zenoh key expressions (`uavnav/v1/vehicle/{id}/{leaf}`, ...), used by the service and the client |
+//! | [`net`] | whether a host is this machine (loopback), for the service's and the client's checks of traffic in clear |
 //! | [`topics`] | the MCAP recording topics (`/uavnav/{vehicle}/{stream}`), used by the dataset reader/writer, the recorders and the client's recording reader |
 //!
 //! Schemas live in `proto/uavnav/v1/*.proto` (common, sensors, config, outputs, service); every
@@ -43,6 +44,7 @@ pub mod convert;
 pub mod foxglove_conv;
 pub mod input;
 pub mod keys;
+pub mod net;
 pub mod topics;
 pub mod wire;
 

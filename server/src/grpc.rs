@@ -20,7 +20,7 @@ use uavnav_proto::v1::uav_nav_server::UavNav;
 use crate::hub::PoseBatch;
 use crate::ingest::Payload;
 use crate::metrics::{Cause, Kind, Outcome, Transport};
-use crate::security::{Access, PeerInfo};
+use crate::security::{Access, AuthTransport, PeerInfo};
 use crate::service::Service;
 use crate::validate;
 
@@ -70,7 +70,7 @@ impl UavNavService {
             .get("authorization")
             .map(|v| v.as_bytes());
         self.service
-            .authenticate("grpc", &names, token)
+            .authenticate(AuthTransport::Grpc, &names, token)
             .map_err(|e| Status::unauthenticated(e.to_string()))
     }
 
@@ -168,7 +168,9 @@ async fn ack_envelope(service: &Service, access: &Access, e: pb::SensorEnvelope)
             metrics.refuse(Transport::Grpc, Kind::Malformed, Cause::Missing);
             crate::ingest::Verdict {
                 status: pb::IngestStatus::InvalidArgument,
-                reason: "payload: required (imu, gnss, mag, baro, camera or config)".into(),
+                reason: crate::ingest::Reason::Own(
+                    "payload: required (imu, gnss, mag, baro, camera or config)".into(),
+                ),
             }
         }
     };
@@ -176,7 +178,7 @@ async fn ack_envelope(service: &Service, access: &Access, e: pb::SensorEnvelope)
         sequence: e.sequence,
         vehicle_id: e.vehicle_id,
         status: verdict.status as i32,
-        reason: verdict.reason,
+        reason: verdict.reason.into(),
     }
 }
 

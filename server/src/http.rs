@@ -15,6 +15,7 @@ use axum::response::IntoResponse;
 use axum::routing::get;
 
 use crate::metrics::Metrics;
+use crate::security::AuthTransport;
 use crate::service::Service;
 
 /// What the HTTP handlers read.
@@ -39,7 +40,7 @@ pub fn router(state: HttpState) -> Router {
 
 async fn metrics(State(s): State<HttpState>, headers: HeaderMap) -> axum::response::Response {
     let token = headers.get(header::AUTHORIZATION).map(|v| v.as_bytes());
-    let access = match s.service.authenticate("http", &[], token) {
+    let access = match s.service.authenticate(AuthTransport::Http, &[], token) {
         Ok(a) => a,
         Err(e) => {
             return (

@@ -37,14 +37,57 @@ pub struct Verdict {
     /// Status.
     pub status: pb::IngestStatus,
     /// Reason (empty when accepted without remark).
-    pub reason: String,
+    pub reason: Reason,
+}
+
+/// The reason of a verdict: made for this message, or shared by every message refused alike (a
+/// refusal of permission, made once per principal and verb so that refusing allocates nothing).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Reason {
+    /// This message's own text.
+    Own(String),
+    /// A text shared by many messages.
+    Shared(Arc<str>),
+}
+
+impl Reason {
+    /// The text.
+    pub fn as_str(&self) -> &str {
+        match self {
+            Reason::Own(s) => s,
+            Reason::Shared(s) => s,
+        }
+    }
+}
+
+/// A reason reads as its text (`verdict.reason.contains(..)`).
+impl std::ops::Deref for Reason {
+    type Target = str;
+    fn deref(&self) -> &str {
+        self.as_str()
+    }
+}
+
+impl From<Reason> for String {
+    fn from(r: Reason) -> Self {
+        match r {
+            Reason::Own(s) => s,
+            Reason::Shared(s) => s.as_ref().to_owned(),
+        }
+    }
+}
+
+impl std::fmt::Display for Reason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
 }
 
 impl Verdict {
     fn accepted(reason: String) -> Self {
         Self {
             status: pb::IngestStatus::Accepted,
-            reason,
+            reason: Reason::Own(reason),
         }
     }
 }
@@ -53,7 +96,7 @@ impl From<Rejection> for Verdict {
     fn from(r: Rejection) -> Self {
         Self {
             status: r.status,
-            reason: r.reason,
+            reason: Reason::Own(r.reason),
         }
     }
 }

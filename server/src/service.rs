@@ -11,9 +11,9 @@ use std::sync::Arc;
 use uavnav_proto::v1 as pb;
 
 use crate::actor::VehicleHandle;
-use crate::ingest::{Ingestor, Payload, Verdict};
+use crate::ingest::{Ingestor, Payload, Reason, Verdict};
 use crate::metrics::{Cause, Metrics, Transport};
-use crate::security::{Access, AuthError, Authorizer, Verb};
+use crate::security::{Access, AuthError, AuthTransport, Authorizer, Refusals, Verb};
 use crate::validate::{self, Rejection};
 
 /// The facade over the ingest path and the registry.
@@ -21,20 +21,25 @@ use crate::validate::{self, Rejection};
 pub struct Service {
     ingestor: Ingestor,
     auth: Arc<Authorizer>,
-}
-
-/// The metrics label of a transport.
-pub fn transport_label(t: Transport) -> &'static str {
-    match t {
-        Transport::Grpc => "grpc",
-        Transport::Zenoh => "zenoh",
-    }
+    refusals: Arc<Refusals>,
 }
 
 impl Service {
     /// A facade over `ingestor`, authorizing with `auth`.
     pub fn new(ingestor: Ingestor, auth: Arc<Authorizer>) -> Self {
-        Self { ingestor, auth }
+        let family = ingestor
+            .registry()
+            .ctx()
+            .metrics
+            .security
+            .auth_refused
+            .clone();
+        let refusals = Arc::new(Refusals::new(family, auth.principals()));
+        Self {
+            ingestor,
+            auth,
+            refusals,
+        }
     }
 
     /// The ingest path (for the adapters' transport-level accounting: decode failures, sizes).
@@ -61,48 +66,29 @@ impl Service {
     /// a failure is counted under `transport`.
     pub fn authenticate(
         &self,
-        transport: &'static str,
+        transport: AuthTransport,
         cert_names: &[String],
         authorization: Option<&[u8]>,
     ) -> Result<Access, AuthError> {
         self.auth
             .authenticate(cert_names, authorization)
             .inspect_err(|e| {
-                self.metrics()
-                    .security
-                    .refused(transport, "anonymous", e.label(), None);
-                tracing::debug!(transport, reason = %e, "caller not recognised");
+                self.refusals.unauthenticated(transport, e);
+                tracing::debug!(transport = transport.as_str(), reason = %e, "caller not recognised");
             })
     }
 
-    /// Checks `verb` on `id` (or on every vehicle under a prefix) and counts a refusal.
-    fn check(
-        &self,
-        transport: &'static str,
-        access: &Access,
-        verb: Verb,
-        id: &str,
-        prefix: bool,
-    ) -> Result<(), Rejection> {
-        let ok = if prefix {
-            access.allows_prefix(verb, id)
-        } else {
-            access.allows(verb, id)
-        };
-        if ok {
+    /// Checks `verb` on `id` (or on every vehicle under `id` when `prefix`) for a request, and
+    /// counts a refusal. The refusal's text (it becomes the request's status) names the vehicle.
+    fn check(&self, access: &Access, verb: Verb, id: &str, prefix: bool) -> Result<(), Rejection> {
+        if access.allows(verb, id) {
             return Ok(());
         }
-        self.metrics()
-            .security
-            .refused(transport, access.name(), "permission_denied", Some(verb));
-        let what = if prefix {
-            if id.is_empty() {
-                "every vehicle".to_string()
-            } else {
-                format!("the vehicles {id:?}*")
-            }
-        } else {
-            format!("vehicle_id {id:?}")
+        self.refusals.denied(access, AuthTransport::Grpc, verb);
+        let what = match (prefix, id.is_empty()) {
+            (true, true) => "every vehicle".to_string(),
+            (true, false) => format!("the vehicles {id:?}*"),
+            (false, _) => format!("vehicle_id {id:?}"),
         };
         Err(Rejection::new(
             pb::IngestStatus::PermissionDenied,
@@ -116,6 +102,8 @@ impl Service {
     }
 
     /// Feeds one message for vehicle `id` (a configuration inside a stream needs `configure`).
+    /// A refusal allocates nothing: its counter and its ack's reason were made once for the
+    /// principal and verb (the ack carries the vehicle's id).
     pub async fn feed(
         &self,
         access: &Access,
@@ -127,8 +115,12 @@ impl Service {
             Payload::Config(_) => Verb::Configure,
             _ => Verb::Feed,
         };
-        if let Err(r) = self.check(transport_label(transport), access, verb, id, false) {
-            return Verdict::from(r);
+        if !access.allows(verb, id) {
+            let reason = self.refusals.denied(access, transport.into(), verb);
+            return Verdict {
+                status: pb::IngestStatus::PermissionDenied,
+                reason: Reason::Shared(reason),
+            };
         }
         self.ingestor.submit(transport, id, payload).await
     }
@@ -143,14 +135,14 @@ impl Service {
         wait: bool,
     ) -> Result<bool, Rejection> {
         validate::vehicle_id(id)?;
-        self.check("grpc", access, Verb::Configure, id, false)?;
+        self.check(access, Verb::Configure, id, false)?;
         self.ingestor.configure(id, config, wait).await
     }
 
     /// Restarts a vehicle's estimator; `None` when the vehicle is unknown.
     pub async fn reset(&self, access: &Access, id: &str) -> Result<Option<()>, Rejection> {
         validate::vehicle_id(id)?;
-        self.check("grpc", access, Verb::Reset, id, false)?;
+        self.check(access, Verb::Reset, id, false)?;
         self.ingestor.reset(id).await
     }
 
@@ -161,7 +153,7 @@ impl Service {
         id: &str,
     ) -> Result<Option<VehicleHandle>, Rejection> {
         validate::vehicle_id(id)?;
-        self.check("grpc", access, Verb::Watch, id, false)?;
+        self.check(access, Verb::Watch, id, false)?;
         Ok(self.ingestor.registry().get(id))
     }
 
@@ -181,13 +173,13 @@ impl Service {
         all: bool,
     ) -> Result<(), Rejection> {
         if all {
-            self.check("grpc", access, Verb::Watch, "", true)?;
+            self.check(access, Verb::Watch, "", true)?;
         }
         if !prefix.is_empty() {
-            self.check("grpc", access, Verb::Watch, prefix, true)?;
+            self.check(access, Verb::Watch, prefix, true)?;
         }
         for id in ids {
-            self.check("grpc", access, Verb::Watch, id, false)?;
+            self.check(access, Verb::Watch, id, false)?;
         }
         Ok(())
     }
@@ -202,11 +194,7 @@ impl Service {
 
     /// Counts a `/metrics` refusal.
     pub fn count_metrics_refusal(&self, access: &Access) {
-        self.metrics().security.refused(
-            "http",
-            access.name(),
-            "permission_denied",
-            Some(Verb::Metrics),
-        );
+        self.refusals
+            .denied(access, AuthTransport::Http, Verb::Metrics);
     }
 }

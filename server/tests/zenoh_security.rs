@@ -1,7 +1,8 @@
 //! Issue 20 on Zenoh: the service listens on mutual TLS only, and its access control (derived from
 //! the same grants as gRPC, keyed on the certificate's common name) lets a ground station put only
-//! on its fleet's input keys and subscribe only to its fleet's outputs. A peer without a
-//! certificate, or with a stranger's, never connects; fleet alpha's puts on bravo's keys never
+//! on its fleet's input keys and subscribe only to its fleet's outputs. A peer in clear, without a
+//! certificate, with a stranger's or with an expired one of the service's CA never connects (and
+//! one that keeps retrying with the expired certificate neither feeds nor receives); fleet alpha's puts on bravo's keys never
 //! create a vehicle; a forged pose and a fake service token from a ground-station certificate
 //! never reach a watcher; the admin space is closed.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
@@ -60,6 +61,36 @@ async fn station(
     zenoh::open(c).await
 }
 
+/// A Zenoh peer with `identity` that opens without a link and keeps trying to connect to
+/// `endpoint` in the background (every 200–500 ms): what a misconfigured drone does for ever.
+async fn lingering_peer(
+    endpoint: &str,
+    ca: &std::path::Path,
+    identity: &Pem,
+) -> zenoh::Result<zenoh::Session> {
+    let mut c = zenoh::Config::default();
+    let q = |p: &std::path::Path| format!("\"{}\"", p.display());
+    for (key, value) in [
+        ("mode", "\"peer\"".to_string()),
+        ("connect/endpoints", format!("[\"{endpoint}\"]")),
+        ("listen/endpoints", "[]".into()),
+        ("scouting/multicast/enabled", "false".into()),
+        ("connect/exit_on_failure", "false".into()),
+        // (`retry` is absent by default: set as a whole.)
+        (
+            "connect/retry",
+            "{ period_init_ms: 200, period_max_ms: 500 }".into(),
+        ),
+        ("transport/link/tls/root_ca_certificate", q(ca)),
+        ("transport/link/tls/connect_certificate", q(&identity.cert)),
+        ("transport/link/tls/connect_private_key", q(&identity.key)),
+        ("transport/link/tls/enable_mtls", "true".into()),
+    ] {
+        c.insert_json5(key, &value).unwrap();
+    }
+    zenoh::open(c).await
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn zenoh_grants_follow_the_certificate() {
     let dir = tempfile::tempdir().unwrap();
@@ -100,6 +131,27 @@ async fn zenoh_grants_follow_the_certificate() {
             .is_err(),
         "a certificate of another CA must not connect"
     );
+    // In clear to the TLS port, and an expired certificate of the service's own CA, naming a
+    // configured principal: no session either.
+    assert!(
+        station(&format!("tcp/localhost:{port}"), &pki.ca, None)
+            .await
+            .is_err(),
+        "a plaintext peer must not connect"
+    );
+    let expired = pki.expired_client("gs-alpha");
+    assert!(
+        station(&endpoint, &pki.ca, Some(&expired)).await.is_err(),
+        "an expired certificate must not connect"
+    );
+    // The same expired certificate on a peer that keeps retrying for the rest of the test: it
+    // subscribes to alpha-1's poses and puts on alpha-3's keys (alpha's fleet: only the
+    // certificate's age stops it).
+    let stale = lingering_peer(&endpoint, &pki.ca, &expired).await.unwrap();
+    let stale_poses = stale
+        .declare_subscriber(keys::vehicle_key("alpha-1", Leaf::Pose))
+        .await
+        .unwrap();
 
     let alpha = station(&endpoint, &pki.ca, Some(&pki.client("gs-alpha")))
         .await
@@ -119,6 +171,12 @@ async fn zenoh_grants_follow_the_certificate() {
         .unwrap();
     let bravo_wide = watcher
         .declare_subscriber(keys::ALL_VEHICLE_KEYS)
+        .await
+        .unwrap();
+    // alpha's own poses, to a session with alpha's valid certificate (alpha puts no pose, so
+    // nothing it receives on this key is local): the positive control of the stale peer.
+    let alpha_poses = alpha
+        .declare_subscriber(keys::vehicle_key("alpha-1", Leaf::Pose))
         .await
         .unwrap();
     let services = watcher
@@ -205,6 +263,27 @@ async fn zenoh_grants_follow_the_certificate() {
         .await
         .unwrap();
 
+    // The stale peer feeds alpha-3 for 3 s, through several of its connection attempts.
+    for k in 0..10 {
+        put(
+            &stale,
+            "alpha-3",
+            Leaf::Config,
+            vehicle_config(false).encode_to_vec(),
+            "uavnav.v1.VehicleConfig",
+        )
+        .await;
+        put(
+            &stale,
+            "alpha-3",
+            Leaf::Gnss,
+            fix(1_000 + k * 1_000_000).encode_to_vec(),
+            "uavnav.v1.GnssFix",
+        )
+        .await;
+        tokio::time::sleep(Duration::from_millis(300)).await;
+    }
+
     let reg = server.registry().clone();
     assert!(
         eventually(Duration::from_secs(10), || {
@@ -226,6 +305,24 @@ async fn zenoh_grants_follow_the_certificate() {
         real += 1;
     }
     assert!(real > 0, "bravo gets its own poses");
+    // alpha-1's poses reach alpha's valid session, never the expired one, whose puts never
+    // created alpha-3.
+    let mut alpha_real = 0;
+    while let Ok(Some(_)) = alpha_poses.try_recv() {
+        alpha_real += 1;
+    }
+    assert!(
+        alpha_real > 0,
+        "alpha gets its own poses (positive control)"
+    );
+    assert!(
+        stale_poses.try_recv().unwrap().is_none(),
+        "a peer with an expired certificate received a pose"
+    );
+    assert!(
+        reg.get("alpha-3").is_none(),
+        "a peer with an expired certificate fed a vehicle"
+    );
     // A wildcard over every vehicle gets bravo's own outputs only: the service's egress rules
     // filter each put by its key.
     let mut wide = 0;
@@ -273,6 +370,6 @@ async fn zenoh_grants_follow_the_certificate() {
             );
         }
     }
-    drop((alpha, bravo, watcher));
+    drop((alpha, bravo, watcher, stale));
     server.shutdown().await.unwrap();
 }

@@ -37,6 +37,16 @@ pub enum Verb {
 }
 
 impl Verb {
+    /// Every verb, in declaration order (`verb as usize` indexes this).
+    pub const ALL: [Verb; 6] = [
+        Verb::Feed,
+        Verb::Watch,
+        Verb::Configure,
+        Verb::Reset,
+        Verb::List,
+        Verb::Metrics,
+    ];
+
     /// The verb's name in configuration, metrics and messages.
     pub fn as_str(self) -> &'static str {
         match self {
@@ -82,21 +92,24 @@ pub struct PrincipalConfig {
 pub struct Principal {
     /// Its configured name.
     pub name: Arc<str>,
+    /// Its position in the authorizer (the refusal counters are kept by it).
+    index: usize,
     grants: Vec<Grant>,
 }
 
 impl Principal {
-    /// Whether it may do `verb` to `vehicle_id`.
+    /// Whether it may do `verb` to `vehicle_id`, or to every vehicle whose id starts with
+    /// `vehicle_id` when that is a prefix (a watch by prefix; `""`: every vehicle): either way
+    /// some grant's prefix must be a prefix of it.
     pub fn allows(&self, verb: Verb, vehicle_id: &str) -> bool {
         self.grants
             .iter()
             .any(|g| g.verbs.contains(&verb) && vehicle_id.starts_with(&g.vehicles))
     }
 
-    /// Whether it may do `verb` to every vehicle whose id starts with `prefix` (a watch or list
-    /// by prefix): some grant's prefix must be a prefix of `prefix`.
-    pub fn allows_prefix(&self, verb: Verb, prefix: &str) -> bool {
-        self.allows(verb, prefix)
+    /// Its position among the authorizer's principals.
+    pub fn index(&self) -> usize {
+        self.index
     }
 
     /// Its grants.
@@ -115,19 +128,11 @@ pub enum Access {
 }
 
 impl Access {
-    /// Whether `verb` on `vehicle_id` is allowed.
+    /// Whether `verb` on `vehicle_id` (or on every vehicle under that prefix) is allowed.
     pub fn allows(&self, verb: Verb, vehicle_id: &str) -> bool {
         match self {
             Access::Open => true,
             Access::Principal(p) => p.allows(verb, vehicle_id),
-        }
-    }
-
-    /// Whether `verb` on every vehicle under `prefix` is allowed (`""`: all vehicles).
-    pub fn allows_prefix(&self, verb: Verb, prefix: &str) -> bool {
-        match self {
-            Access::Open => true,
-            Access::Principal(p) => p.allows_prefix(verb, prefix),
         }
     }
 
@@ -249,6 +254,7 @@ impl Authorizer {
             }
             out.principals.push(Arc::new(Principal {
                 name: c.name.as_str().into(),
+                index,
                 grants: c.grants.clone(),
             }));
         }
@@ -402,11 +408,19 @@ mod tests {
         assert!(!alpha.allows(Verb::Feed, "bravo-1"));
         assert!(!alpha.allows(Verb::Configure, "alpha-1"));
         assert!(!alpha.allows(Verb::Metrics, "alpha-1"));
-        assert!(alpha.allows_prefix(Verb::Watch, "alpha-"));
-        assert!(alpha.allows_prefix(Verb::Watch, "alpha-7"));
-        assert!(!alpha.allows_prefix(Verb::Watch, "alpha"));
-        assert!(!alpha.allows_prefix(Verb::Watch, ""));
-        assert!(Access::Open.allows_prefix(Verb::Watch, ""));
+        // By prefix: the grant's prefix must be a prefix of the watched one.
+        assert!(alpha.allows(Verb::Watch, "alpha-"));
+        assert!(alpha.allows(Verb::Watch, "alpha-7"));
+        assert!(!alpha.allows(Verb::Watch, "alpha"));
+        assert!(!alpha.allows(Verb::Watch, ""));
+        assert!(Access::Open.allows(Verb::Watch, ""));
+    }
+
+    #[test]
+    fn verbs_index_their_table() {
+        for (i, v) in Verb::ALL.into_iter().enumerate() {
+            assert_eq!(v as usize, i, "{v:?}");
+        }
     }
 
     #[test]

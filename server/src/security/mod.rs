@@ -5,6 +5,7 @@
 //! | [`auth`] | principals (certificate names, token digests), grants by vehicle prefix and verb |
 //! | [`tls`] | the reloadable TLS acceptor for gRPC and HTTP; peer certificate names |
 //! | [`zenoh`] | Zenoh over mutual TLS and its access-control rules, derived from the same grants |
+//! | [`refusals`] | the refusal counters, resolved once per label set (a refusal allocates nothing) |
 //! | here | the `[security]` configuration, the startup exposure check, the metrics |
 //!
 //! The rule at startup ([`exposure`]): a listener without TLS is allowed on loopback only,
@@ -13,10 +14,11 @@
 //! everything not granted.
 
 pub mod auth;
+pub mod refusals;
 pub mod tls;
 pub mod zenoh;
 
-use std::net::{IpAddr, SocketAddr};
+use std::net::SocketAddr;
 use std::path::PathBuf;
 
 use prometheus_client::encoding::EncodeLabelSet;
@@ -24,8 +26,10 @@ use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::family::Family;
 use prometheus_client::registry::Registry;
 use serde::Deserialize;
+use uavnav_proto::net::is_loopback_host;
 
 pub use auth::{Access, AuthError, Authorizer, Grant, PrincipalConfig, Verb};
+pub use refusals::{ANONYMOUS, Refusals};
 pub use tls::{CertStore, PeerInfo, TlsError};
 
 /// `[security]`.
@@ -66,10 +70,44 @@ fn default_reload_s() -> f64 {
     10.0
 }
 
+/// The transport a caller came by (the `transport` label of `uavnav_auth_refused_total`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum AuthTransport {
+    /// gRPC.
+    Grpc,
+    /// Zenoh.
+    Zenoh,
+    /// HTTP (`/metrics`).
+    Http,
+}
+
+impl AuthTransport {
+    /// Every transport, in declaration order (`t as usize` indexes this).
+    pub const ALL: [AuthTransport; 3] = [Self::Grpc, Self::Zenoh, Self::Http];
+
+    /// The label.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Grpc => "grpc",
+            Self::Zenoh => "zenoh",
+            Self::Http => "http",
+        }
+    }
+}
+
+impl From<crate::metrics::Transport> for AuthTransport {
+    fn from(t: crate::metrics::Transport) -> Self {
+        match t {
+            crate::metrics::Transport::Grpc => Self::Grpc,
+            crate::metrics::Transport::Zenoh => Self::Zenoh,
+        }
+    }
+}
+
 /// Labels of `uavnav_auth_refused_total`.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, EncodeLabelSet)]
 pub struct AuthLabels {
-    /// `grpc`, `http`.
+    /// `grpc`, `zenoh`, `http` ([`AuthTransport`]).
     pub transport: &'static str,
     /// The principal's configured name, or `anonymous`.
     pub principal: String,
@@ -135,18 +173,8 @@ impl SecurityMetrics {
         m
     }
 
-    /// Counts one refusal.
-    pub fn refused(
-        &self,
-        transport: &'static str,
-        principal: &str,
-        reason: &'static str,
-        verb: Option<Verb>,
-    ) {
-        self.counter(transport, principal, reason, verb).inc();
-    }
-
-    /// The number of refusals with these labels.
+    /// The number of refusals with these labels (a lookup: for tests and tools, not the hot
+    /// path, which counts through [`Refusals`]).
     pub fn refused_count(
         &self,
         transport: &'static str,
@@ -154,16 +182,6 @@ impl SecurityMetrics {
         reason: &'static str,
         verb: Option<Verb>,
     ) -> u64 {
-        self.counter(transport, principal, reason, verb).get()
-    }
-
-    fn counter(
-        &self,
-        transport: &'static str,
-        principal: &str,
-        reason: &'static str,
-        verb: Option<Verb>,
-    ) -> Counter {
         self.auth_refused
             .get_or_create(&AuthLabels {
                 transport,
@@ -171,7 +189,7 @@ impl SecurityMetrics {
                 reason,
                 verb: verb.map_or("-", Verb::as_str),
             })
-            .clone()
+            .get()
     }
 }
 
@@ -186,12 +204,6 @@ pub struct Listener {
     pub loopback: bool,
     /// Whether it speaks TLS.
     pub tls: bool,
-}
-
-/// Whether `host` (an IP, `[v6]`, or a name) is a loopback address.
-pub fn is_loopback_host(host: &str) -> bool {
-    let h = host.trim_start_matches('[').trim_end_matches(']');
-    h.eq_ignore_ascii_case("localhost") || h.parse::<IpAddr>().is_ok_and(|ip| ip.is_loopback())
 }
 
 /// The host of a Zenoh locator `proto/HOST:PORT[?…][#…]`.
@@ -291,6 +303,13 @@ pub fn exposure(config: &crate::Config) -> Result<Vec<String>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn transports_index_their_table() {
+        for (i, t) in AuthTransport::ALL.into_iter().enumerate() {
+            assert_eq!(t as usize, i, "{t:?}");
+        }
+    }
 
     #[test]
     fn plaintext_is_loopback_only_unless_insecure() {
