@@ -91,7 +91,8 @@ fn boot_us(t: &Table, row: &[Value]) -> Option<i64> {
     if let Some(us) = t.num(row, "TimeUS") {
         return Some(us as i64);
     }
-    t.num(row, "TimeMS").map(|ms| ms as i64 * 1000)
+    t.num(row, "TimeMS")
+        .map(|ms| (ms as i64).saturating_mul(1000))
 }
 
 /// Whether a row belongs to the first instance (layouts with an `I`/`C` field log all
@@ -127,7 +128,7 @@ fn gps_rows(t: &Table) -> Vec<GpsRow> {
         .filter_map(|r| {
             let (boot_us, tow, week) = if old {
                 (
-                    t.num(r, "T")? as i64 * 1000,
+                    (t.num(r, "T")? as i64).saturating_mul(1000),
                     t.num(r, "TimeMS"),
                     t.num(r, "Week"),
                 )
@@ -227,16 +228,21 @@ pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, Log
     }
     let diffs: Vec<f64> = kept
         .iter()
-        .filter_map(|g| Some((g.unix_ms? * 1000 - g.boot_us) as f64 * 1e-3))
+        .filter_map(|g| {
+            Some((g.unix_ms?.saturating_mul(1000).saturating_sub(g.boot_us)) as f64 * 1e-3)
+        })
         .collect();
     let (time_base, offset_ns) = match crate::median(&diffs) {
-        Some(ms) => (TimeBase::Unix, ms.round_ties_even() as i64 * 1_000_000),
+        Some(ms) => (
+            TimeBase::Unix,
+            (ms.round_ties_even() as i64).saturating_mul(1_000_000),
+        ),
         None => {
             notes.push("no GPS week/time of week: times are since boot".into());
             (TimeBase::Boot, 0)
         }
     };
-    let t_ns = |boot_us: i64| boot_us * 1000 + offset_ns;
+    let t_ns = |boot_us: i64| boot_us.saturating_mul(1000).saturating_add(offset_ns);
 
     // IMU
     let mut imu: Vec<ImuSample> = Vec::new();

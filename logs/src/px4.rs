@@ -64,13 +64,14 @@ pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, Log
         })
         .unwrap_or_default();
     let (time_base, offset_ns) = match crate::median(&diffs) {
-        Some(us) => (TimeBase::Unix, us.round() as i64 * 1000),
+        Some(us) => (TimeBase::Unix, (us.round() as i64).saturating_mul(1000)),
         None => {
             notes.push("no GNSS UTC time: times are since boot".into());
             (TimeBase::Boot, 0)
         }
     };
-    let t_ns = |us: f64| us as i64 * 1000 + offset_ns;
+    // Saturating: a corrupt stamp must give an absurd time that later checks refuse, not a panic.
+    let t_ns = |us: f64| (us as i64).saturating_mul(1000).saturating_add(offset_ns);
 
     let sc = log
         .topic("sensor_combined")
