@@ -248,7 +248,10 @@ pub(crate) fn sensor_configs(
 /// Median sample interval of increasing stamps, s.
 pub(crate) fn median_dt_s(t_ns: impl Iterator<Item = i64>) -> Option<f64> {
     let t: Vec<i64> = t_ns.collect();
-    let dts: Vec<f64> = t.windows(2).map(|w| (w[1] - w[0]) as f64 * 1e-9).collect();
+    let dts: Vec<f64> = t
+        .windows(2)
+        .map(|w| w[1].saturating_sub(w[0]) as f64 * 1e-9)
+        .collect();
     median(&dts).filter(|dt| *dt > 0.0)
 }
 
