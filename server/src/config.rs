@@ -162,6 +162,17 @@ pub struct GrpcConfig {
     pub ack_buffer: usize,
     /// Serve gRPC server reflection (lets any caller list the API; off by default).
     pub reflection: bool,
+    /// Connections open at once (TLS handshakes included); beyond, new ones are closed at once
+    /// and counted (`uavnav_connections_refused_total{reason="limit"}`).
+    pub max_connections: usize,
+    /// A connection whose peer sent nothing for this long is closed, s. Must exceed the
+    /// keepalive interval plus its timeout, so that a live idle peer (answering pings) stays.
+    pub idle_timeout_s: f64,
+    /// HTTP/2 keepalive: the service pings each connection this often, s (0: off).
+    pub keepalive_interval_s: f64,
+    /// A ping not answered within this closes the connection (a link that died without a
+    /// reset), s.
+    pub keepalive_timeout_s: f64,
 }
 
 impl Default for GrpcConfig {
@@ -171,6 +182,10 @@ impl Default for GrpcConfig {
             max_message_bytes: 16 << 20,
             ack_buffer: 256,
             reflection: false,
+            max_connections: 1024,
+            idle_timeout_s: 120.0,
+            keepalive_interval_s: 20.0,
+            keepalive_timeout_s: 20.0,
         }
     }
 }
@@ -183,12 +198,21 @@ pub struct HttpConfig {
     /// needs `[security.tls]` or `security.insecure`, and with principals `/metrics` needs a
     /// grant of `metrics`).
     pub addr: SocketAddr,
+    /// Connections open at once; beyond, new ones are closed at once and counted.
+    pub max_connections: usize,
+    /// A connection whose peer sent nothing for this long is closed, s.
+    pub idle_timeout_s: f64,
+    /// Time a client has to send a request's headers (HTTP/1; slow senders are cut off), s.
+    pub header_timeout_s: f64,
 }
 
 impl Default for HttpConfig {
     fn default() -> Self {
         Self {
             addr: SocketAddr::from(([127, 0, 0, 1], 9464)),
+            max_connections: 64,
+            idle_timeout_s: 30.0,
+            header_timeout_s: 10.0,
         }
     }
 }
@@ -578,6 +602,33 @@ impl Config {
         {
             return bad(
                 "grpc.ack_buffer, vehicles.input_queue and vehicles.camera_queue must be > 0",
+            );
+        }
+        let g = &self.grpc;
+        let seconds = |x: f64| x.is_finite() && x > 0.0 && x <= 86_400.0;
+        if g.max_connections == 0 || self.http.max_connections == 0 {
+            return bad("grpc.max_connections and http.max_connections must be > 0");
+        }
+        if !(seconds(g.idle_timeout_s)
+            && seconds(self.http.idle_timeout_s)
+            && seconds(self.http.header_timeout_s))
+        {
+            return bad(
+                "grpc.idle_timeout_s, http.idle_timeout_s and http.header_timeout_s must be in (0, 86400]",
+            );
+        }
+        if !(g.keepalive_interval_s == 0.0 || seconds(g.keepalive_interval_s))
+            || !seconds(g.keepalive_timeout_s)
+        {
+            return bad(
+                "grpc.keepalive_interval_s must be 0 (off) or in (0, 86400], grpc.keepalive_timeout_s in (0, 86400]",
+            );
+        }
+        if g.keepalive_interval_s > 0.0
+            && g.idle_timeout_s <= g.keepalive_interval_s + g.keepalive_timeout_s
+        {
+            return bad(
+                "grpc.idle_timeout_s must exceed grpc.keepalive_interval_s + grpc.keepalive_timeout_s (a live idle client answers pings only that often)",
             );
         }
         let v = &self.vehicles;

@@ -4,9 +4,15 @@
 //! With principals configured, `/metrics` needs an `authorization: Bearer` token of a principal
 //! granted `metrics` (401 without a recognised token, 403 without the grant); the probes stay
 //! open (an orchestrator's probe carries no credentials, and they tell nothing about vehicles).
+//!
+//! [`serve`] serves the router connection by connection over the service's own accept loop
+//! ([`crate::conn`]: limits, idle timeout, TLS) with hyper's HTTP/1 header timeout, so a client
+//! that dribbles its request headers (slowloris) is cut off after `http.header_timeout_s`.
 
+use std::future::Future;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
 
 use axum::Router;
 use axum::extract::State;
@@ -14,6 +20,14 @@ use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::IntoResponse;
 use axum::routing::get;
 
+use hyper_util::rt::{TokioExecutor, TokioIo, TokioTimer};
+use hyper_util::server::conn::auto;
+use hyper_util::server::graceful::GracefulShutdown;
+use hyper_util::service::TowerToHyperService;
+use tokio::sync::mpsc;
+use tracing::debug;
+
+use crate::conn::Conn;
 use crate::metrics::Metrics;
 use crate::security::AuthTransport;
 use crate::service::Service;
@@ -36,6 +50,46 @@ pub fn router(state: HttpState) -> Router {
         .route("/livez", get(|| async { "ok\n" }))
         .route("/readyz", get(readyz))
         .with_state(state)
+}
+
+/// Serves `app` on the connections of `conns` until `shutdown`, then closes idle connections
+/// and lets requests in progress finish (the caller bounds that wait).
+pub async fn serve(
+    mut conns: mpsc::Receiver<Conn>,
+    app: Router,
+    header_timeout: Duration,
+    shutdown: impl Future<Output = ()>,
+) {
+    let mut builder = auto::Builder::new(TokioExecutor::new());
+    builder
+        .http1()
+        .timer(TokioTimer::new())
+        .header_read_timeout(header_timeout);
+    builder.http2().timer(TokioTimer::new());
+    let graceful = GracefulShutdown::new();
+    tokio::pin!(shutdown);
+    let mut accepting = true;
+    loop {
+        tokio::select! {
+            c = conns.recv(), if accepting => {
+                // The accept loop ends first at shutdown: keep serving until told to stop.
+                let Some(c) = c else {
+                    accepting = false;
+                    continue;
+                };
+                let service = TowerToHyperService::new(app.clone());
+                let conn = builder.serve_connection(TokioIo::new(c), service).into_owned();
+                let conn = graceful.watch(conn);
+                tokio::spawn(async move {
+                    if let Err(e) = conn.await {
+                        debug!(error = %e, "HTTP connection ended");
+                    }
+                });
+            }
+            () = &mut shutdown => break,
+        }
+    }
+    graceful.shutdown().await;
 }
 
 async fn metrics(State(s): State<HttpState>, headers: HeaderMap) -> axum::response::Response {

@@ -17,6 +17,7 @@
 //! | [`service`] | the transport-neutral facade the adapters call: authorization per request and message, then ingest or the registry |
 //! | [`ingest`] | the transport-neutral ingest path (validate, gate, route, count) |
 //! | [`validate`] | field-by-field input checks with precise statuses |
+//! | [`conn`] | every TCP listener's accept loop: connection limits, idle timeout, TLS handshakes, the file-descriptor budget |
 //! | [`grpc`] | the tonic `uavnav.v1.UavNav` service |
 //! | [`zenoh_io`] | the embedded Zenoh session: inputs, outputs, queryables, liveliness |
 //! | [`hub`] | broadcast fan-out of poses and health |
@@ -31,6 +32,7 @@
 
 pub mod actor;
 pub mod config;
+pub mod conn;
 pub mod engine;
 pub mod grpc;
 pub mod health;

@@ -275,6 +275,8 @@ pub struct Metrics {
     pub divergence_resets: Counter,
     /// Authentication and authorization refusals, TLS handshake failures.
     pub security: crate::security::SecurityMetrics,
+    /// Connections open, refused and closed, by listener.
+    pub connections: crate::conn::ConnectionMetrics,
 }
 
 impl Metrics {
@@ -424,6 +426,7 @@ impl Metrics {
             foxglove_dropped.clone(),
         );
         let security = crate::security::SecurityMetrics::register(&mut registry);
+        let connections = crate::conn::ConnectionMetrics::register(&mut registry);
         let admission_evictions = Counter::default();
         registry.register(
             "admission_evictions",
@@ -458,6 +461,7 @@ impl Metrics {
             frames_rejected,
             divergence_resets,
             security,
+            connections,
             admission_evictions,
         }
     }

@@ -8,7 +8,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use anyhow::{Context, anyhow};
-use futures::StreamExt;
 use tokio::sync::{oneshot, watch};
 use tokio::task::JoinHandle;
 use tonic::codec::CompressionEncoding;
@@ -17,6 +16,7 @@ use uavnav_proto::v1::uav_nav_server::UavNavServer;
 
 use crate::actor::{Ctx, Msg};
 use crate::config::Config;
+use crate::conn::{self, ConnLimits, ListenerKind, TlsSide};
 use crate::engine::{SharedFactory, default_factory};
 use crate::grpc::{UavNavService, remap_transport_status};
 use crate::http::{HttpState, router};
@@ -25,7 +25,7 @@ use crate::ingest::Ingestor;
 use crate::metrics::Metrics;
 use crate::record::Recorder;
 use crate::registry::Registry;
-use crate::security::tls::{self, Alpn, CertStore, HttpTlsListener};
+use crate::security::tls::{Alpn, CertStore};
 use crate::security::{Authorizer, exposure};
 use crate::service::Service;
 use crate::validate::ImageLimits;
@@ -73,6 +73,13 @@ impl Server {
         factory: SharedFactory,
     ) -> anyhow::Result<RunningServer> {
         let (mut ingestor, stop_tx) = ingest_path(&config, factory)?;
+        let fds = conn::fd_budget(conn::fds_needed(&config)).map_err(|e| anyhow!(e))?;
+        if fds.raised {
+            info!(
+                limit = fds.limit,
+                "raised the open-file limit to the configuration's budget"
+            );
+        }
         for w in exposure(&config).map_err(|e| anyhow!(e))? {
             warn!("{w}");
         }
@@ -147,7 +154,7 @@ impl Server {
         .await?;
         let ready = Arc::new(AtomicBool::new(true));
         let (http_addr, http) = serve_http(
-            config.http.addr,
+            &config.http,
             HttpState {
                 metrics,
                 ready: Arc::clone(&ready),
@@ -249,6 +256,7 @@ async fn serve_grpc(
 ) -> anyhow::Result<(SocketAddr, (JoinHandle<()>, oneshot::Sender<()>))> {
     let max = config.grpc.max_message_bytes;
     let tls_failures = service.metrics().security.tls_failures.clone();
+    let conn_metrics = service.metrics().connections.clone();
     let uavnav = UavNavServer::new(UavNavService::new(service, config.grpc.ack_buffer))
         .max_decoding_message_size(max)
         .max_encoding_message_size(max)
@@ -263,7 +271,15 @@ async fn serve_grpc(
     let (stop_tx, stop_rx) = oneshot::channel::<()>();
     // The health service stays open to every caller (probes carry no credentials); reflection
     // lists the whole API, so it is served only when asked for.
+    let keepalive = (config.grpc.keepalive_interval_s > 0.0).then(|| {
+        (
+            Duration::from_secs_f64(config.grpc.keepalive_interval_s),
+            Duration::from_secs_f64(config.grpc.keepalive_timeout_s),
+        )
+    });
     let mut router = tonic::transport::Server::builder()
+        .http2_keepalive_interval(keepalive.map(|k| k.0))
+        .http2_keepalive_timeout(keepalive.map(|k| k.1))
         .layer(axum::middleware::map_response(
             remap_transport_status::<tonic::body::Body>,
         ))
@@ -288,73 +304,71 @@ async fn serve_grpc(
     let shutdown = async {
         let _ = stop_rx.await;
     };
-    let task = match certs {
-        Some(store) => {
-            let conns = tls::accept(listener, store, Alpn::Grpc, tls_failures, stop);
-            let incoming =
-                tokio_stream::wrappers::ReceiverStream::new(conns).map(Ok::<_, std::io::Error>);
-            tokio::spawn(async move {
-                if let Err(e) = router
-                    .serve_with_incoming_shutdown(incoming, shutdown)
-                    .await
-                {
-                    warn!(error = %e, "gRPC server ended with an error");
-                }
-            })
-        }
-        None => {
-            let incoming =
-                tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true));
-            tokio::spawn(async move {
-                if let Err(e) = router
-                    .serve_with_incoming_shutdown(incoming, shutdown)
-                    .await
-                {
-                    warn!(error = %e, "gRPC server ended with an error");
-                }
-            })
-        }
+    let tls = certs.map(|store| TlsSide {
+        store,
+        alpn: Alpn::Grpc,
+        failures: tls_failures,
+    });
+    let limits = ConnLimits {
+        max_connections: config.grpc.max_connections,
+        idle_timeout: Duration::from_secs_f64(config.grpc.idle_timeout_s),
     };
+    let conns = conn::accept(
+        listener,
+        ListenerKind::Grpc,
+        limits,
+        tls,
+        conn_metrics,
+        stop,
+    );
+    let task = tokio::spawn(async move {
+        if let Err(e) = router
+            .serve_with_incoming_shutdown(conn::incoming(conns), shutdown)
+            .await
+        {
+            warn!(error = %e, "gRPC server ended with an error");
+        }
+    });
     Ok((addr, (task, stop_tx)))
 }
 
 async fn serve_http(
-    addr: SocketAddr,
+    settings: &crate::config::HttpConfig,
     state: HttpState,
     certs: Option<Arc<CertStore>>,
     stop: watch::Receiver<bool>,
 ) -> anyhow::Result<(SocketAddr, (JoinHandle<()>, oneshot::Sender<()>))> {
+    let addr = settings.addr;
     let listener = tokio::net::TcpListener::bind(addr)
         .await
         .with_context(|| format!("binding HTTP on {addr}"))?;
     let bound = listener.local_addr()?;
     let (stop_tx, stop_rx) = oneshot::channel::<()>();
-    let failures = state.service.metrics().security.tls_failures.clone();
+    let metrics = state.service.metrics();
+    let tls = certs.map(|store| TlsSide {
+        store,
+        alpn: Alpn::Http,
+        failures: metrics.security.tls_failures.clone(),
+    });
+    let limits = ConnLimits {
+        max_connections: settings.max_connections,
+        idle_timeout: Duration::from_secs_f64(settings.idle_timeout_s),
+    };
+    let conn_metrics = metrics.connections.clone();
+    let conns = conn::accept(
+        listener,
+        ListenerKind::Http,
+        limits,
+        tls,
+        conn_metrics,
+        stop,
+    );
     let app = router(state);
+    let header_timeout = Duration::from_secs_f64(settings.header_timeout_s);
     let shutdown = async {
         let _ = stop_rx.await;
     };
-    let task = match certs {
-        Some(store) => {
-            let conns = tls::accept(listener, store, Alpn::Http, failures, stop);
-            let listener = HttpTlsListener {
-                conns,
-                local: bound,
-            };
-            tokio::spawn(async move {
-                let serve = axum::serve(listener, app).with_graceful_shutdown(shutdown);
-                if let Err(e) = serve.await {
-                    warn!(error = %e, "HTTP server ended with an error");
-                }
-            })
-        }
-        None => tokio::spawn(async move {
-            let serve = axum::serve(listener, app).with_graceful_shutdown(shutdown);
-            if let Err(e) = serve.await {
-                warn!(error = %e, "HTTP server ended with an error");
-            }
-        }),
-    };
+    let task = tokio::spawn(crate::http::serve(conns, app, header_timeout, shutdown));
     Ok((bound, (task, stop_tx)))
 }
 

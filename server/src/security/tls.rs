@@ -3,34 +3,31 @@
 //! Why not tonic's built-in TLS: certificates must be reloadable without a restart (an operator
 //! rotates them while drones fly), the verified client certificate's names are the caller's
 //! identity, and a handshake that never finishes must not hold the accept loop. So: one
-//! [`CertStore`] that re-reads the files when they change, and an accept loop that hands each
-//! connection to its own handshake task (bounded in number and in time) and passes finished TLS
-//! streams on as [`TlsConn`]s, which carry the peer's names as [`PeerInfo`].
+//! [`CertStore`] that re-reads the files when they change, and [`handshake`], which the
+//! connection layer ([`crate::conn`]) runs in a task of its own per connection (bounded in number
+//! by [`MAX_HANDSHAKES`] and in time by [`HANDSHAKE_TIMEOUT`]); the finished connection carries
+//! the peer's names as [`PeerInfo`].
 
 use std::io;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::pin::Pin;
 use std::sync::{Arc, RwLock};
-use std::task::{Context, Poll};
 use std::time::{Duration, SystemTime};
 
 use rustls::RootCertStore;
 use rustls::server::WebPkiClientVerifier;
 use rustls_pki_types::pem::PemObject;
 use rustls_pki_types::{CertificateDer, PrivateKeyDer};
-use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
-use tokio::net::{TcpListener, TcpStream};
-use tokio::sync::{Semaphore, mpsc};
+use tokio::net::TcpStream;
 use tracing::{debug, info, warn};
 
 use super::TlsConfig;
 
 /// Handshakes in progress at once on one listener; beyond, new connections wait in the kernel's
 /// accept queue (a slowloris of half-open handshakes cannot take every file descriptor).
-const MAX_HANDSHAKES: usize = 256;
+pub const MAX_HANDSHAKES: usize = 256;
 /// Time a client has to finish its TLS handshake.
-const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
+pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// A failure loading certificates or keys.
 #[derive(Debug, thiserror::Error)]
@@ -236,140 +233,39 @@ pub enum Alpn {
     Http,
 }
 
-/// A finished TLS connection.
-#[derive(Debug)]
-pub struct TlsConn {
-    inner: tokio_rustls::server::TlsStream<TcpStream>,
-    info: PeerInfo,
-}
-
-impl TlsConn {
-    /// Who is at the other end.
-    pub fn peer(&self) -> &PeerInfo {
-        &self.info
-    }
-}
-
-impl AsyncRead for TlsConn {
-    fn poll_read(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        buf: &mut ReadBuf<'_>,
-    ) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.inner).poll_read(cx, buf)
-    }
-}
-
-impl AsyncWrite for TlsConn {
-    fn poll_write(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        buf: &[u8],
-    ) -> Poll<io::Result<usize>> {
-        Pin::new(&mut self.inner).poll_write(cx, buf)
-    }
-    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.inner).poll_flush(cx)
-    }
-    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.inner).poll_shutdown(cx)
-    }
-    fn poll_write_vectored(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        bufs: &[io::IoSlice<'_>],
-    ) -> Poll<io::Result<usize>> {
-        Pin::new(&mut self.inner).poll_write_vectored(cx, bufs)
-    }
-    fn is_write_vectored(&self) -> bool {
-        self.inner.is_write_vectored()
-    }
-}
-
-impl tonic::transport::server::Connected for TlsConn {
-    type ConnectInfo = PeerInfo;
-    fn connect_info(&self) -> PeerInfo {
-        self.info.clone()
-    }
-}
-
-/// Accepts TCP connections on `listener`, runs their handshakes, and yields the finished TLS
-/// connections. Failed handshakes are counted in `failures` (by reason) and logged at debug
-/// level. Ends when `stop` fires or the receiver is dropped.
-pub fn accept(
-    listener: TcpListener,
-    store: Arc<CertStore>,
+/// Runs the TLS handshake of an accepted connection (at most [`HANDSHAKE_TIMEOUT`]) and reads
+/// the verified client certificate's names. `Err` is the metrics label of the failure
+/// (`uavnav_tls_failures_total`), already logged at debug level.
+pub async fn handshake(
+    store: &CertStore,
     alpn: Alpn,
-    failures: super::TlsFailures,
-    mut stop: tokio::sync::watch::Receiver<bool>,
-) -> mpsc::Receiver<TlsConn> {
-    let (tx, rx) = mpsc::channel(64);
-    let slots = Arc::new(Semaphore::new(MAX_HANDSHAKES));
-    tokio::spawn(async move {
-        loop {
-            let Ok(permit) = Arc::clone(&slots).acquire_owned().await else {
-                break;
-            };
-            let accepted = tokio::select! {
-                r = listener.accept() => r,
-                _ = stop.wait_for(|s| *s) => break,
-                _ = tx.closed() => break,
-            };
-            let (tcp, remote) = match accepted {
-                Ok(c) => c,
-                Err(e) => {
-                    // Out of file descriptors and the like: say so and back off instead of
-                    // spinning on the error.
-                    warn!(error = %e, "TLS listener cannot accept; retrying in 100 ms");
-                    failures.inc("accept");
-                    tokio::time::sleep(Duration::from_millis(100)).await;
-                    continue;
-                }
-            };
-            let _ = tcp.set_nodelay(true);
-            let config = match alpn {
-                Alpn::Grpc => store.grpc(),
-                Alpn::Http => store.http(),
-            };
-            let (tx, failures) = (tx.clone(), failures.clone());
-            tokio::spawn(async move {
-                let _permit = permit;
-                let acceptor = tokio_rustls::TlsAcceptor::from(config);
-                let stream =
-                    match tokio::time::timeout(HANDSHAKE_TIMEOUT, acceptor.accept(tcp)).await {
-                        Ok(Ok(s)) => s,
-                        Ok(Err(e)) => {
-                            debug!(%remote, error = %e, "TLS handshake failed");
-                            failures.inc(handshake_reason(&e));
-                            return;
-                        }
-                        Err(_) => {
-                            debug!(%remote, "TLS handshake timed out");
-                            failures.inc("timeout");
-                            return;
-                        }
-                    };
-                let cert_names: Vec<String> = stream
-                    .get_ref()
-                    .1
-                    .peer_certificates()
-                    .and_then(|c| c.first())
-                    .map(|c| certificate_names(c))
-                    .unwrap_or_default();
-                let info = PeerInfo {
-                    remote: Some(remote),
-                    cert_names: cert_names.into(),
-                };
-                let _ = tx
-                    .send(TlsConn {
-                        inner: stream,
-                        info,
-                    })
-                    .await;
-            });
+    tcp: TcpStream,
+    remote: SocketAddr,
+) -> Result<(tokio_rustls::server::TlsStream<TcpStream>, Arc<[String]>), &'static str> {
+    let config = match alpn {
+        Alpn::Grpc => store.grpc(),
+        Alpn::Http => store.http(),
+    };
+    let acceptor = tokio_rustls::TlsAcceptor::from(config);
+    let stream = match tokio::time::timeout(HANDSHAKE_TIMEOUT, acceptor.accept(tcp)).await {
+        Ok(Ok(s)) => s,
+        Ok(Err(e)) => {
+            debug!(%remote, error = %e, "TLS handshake failed");
+            return Err(handshake_reason(&e));
         }
-    });
-    rx
+        Err(_) => {
+            debug!(%remote, "TLS handshake timed out");
+            return Err("timeout");
+        }
+    };
+    let cert_names: Vec<String> = stream
+        .get_ref()
+        .1
+        .peer_certificates()
+        .and_then(|c| c.first())
+        .map(|c| certificate_names(c))
+        .unwrap_or_default();
+    Ok((stream, cert_names.into()))
 }
 
 /// A metrics label for a failed handshake.
@@ -389,33 +285,5 @@ fn handshake_reason(e: &io::Error) -> &'static str {
         "not_tls"
     } else {
         "handshake"
-    }
-}
-
-/// An axum listener over the TLS connections of [`accept`].
-#[derive(Debug)]
-pub struct HttpTlsListener {
-    /// Finished connections.
-    pub conns: mpsc::Receiver<TlsConn>,
-    /// The bound address.
-    pub local: SocketAddr,
-}
-
-impl axum::serve::Listener for HttpTlsListener {
-    type Io = TlsConn;
-    type Addr = Option<SocketAddr>;
-    async fn accept(&mut self) -> (Self::Io, Self::Addr) {
-        match self.conns.recv().await {
-            Some(c) => {
-                let remote = c.info.remote;
-                (c, remote)
-            }
-            // The acceptor ended (shutdown): never yield again; the server's graceful
-            // shutdown ends the serve loop.
-            None => std::future::pending().await,
-        }
-    }
-    fn local_addr(&self) -> io::Result<Self::Addr> {
-        Ok(Some(self.local))
     }
 }
