@@ -327,6 +327,8 @@ struct OpenFile {
     out: McapWriter,
     path: PathBuf,
     bytes: u64,
+    /// Messages handed to the file: lost (and counted) if it cannot be finished.
+    messages: u64,
     opened: Instant,
 }
 
@@ -391,6 +393,7 @@ impl Writer {
         match write(&mut file.out, vehicle, body, log_ns, frame.as_ref()) {
             Ok(bytes) => {
                 file.bytes += bytes;
+                file.messages += n;
                 self.metrics.record_written.inc_by(n);
                 self.metrics.record_bytes.inc_by(bytes);
             }
@@ -433,6 +436,7 @@ impl Writer {
                     out,
                     path,
                     bytes: 0,
+                    messages: 0,
                     opened: Instant::now(),
                 });
                 true
@@ -454,7 +458,14 @@ impl Writer {
             Ok(()) => {
                 self.metrics.record_files.inc();
             }
-            Err(e) => warn!(file = %file.path.display(), error = %e, "recording: finishing failed"),
+            Err(e) => {
+                // Buffered chunks reach the disk only here: a full disk often shows first at
+                // the finish, and then everything the file held is lost.
+                warn!(file = %file.path.display(), error = %e, "recording: finishing failed");
+                self.metrics
+                    .record_dropped(RecordDrop::WriteError, file.messages);
+                self.retry_at = Some(Instant::now() + RETRY_AFTER);
+            }
         }
         self.retain(self.config.retain_bytes);
     }

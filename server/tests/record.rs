@@ -1,6 +1,7 @@
 //! Recording: a simulated flight streamed into a service with `[record]` on is in the MCAP file
 //! afterwards, inputs in order, and replaying those inputs gives exactly the recorded poses; files
-//! rotate by size and the oldest are deleted; a tiny queue budget drops (counted), never blocks.
+//! rotate by size (the oldest deleted) and by time; a tiny queue budget drops (counted), never
+//! blocks; a full disk loses the recording, counted, and nothing else.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 mod common;
@@ -218,4 +219,61 @@ async fn a_full_queue_drops_and_counts_instead_of_blocking() {
         "{text}"
     );
     server.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rotation_by_time_closes_an_idle_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let (config, events) = common::sim_flight("smoke", 1.0);
+    let want = offline(&config, &events);
+    let mut cfg = record_config(dir.path());
+    cfg.record.rotate_s = 0.3;
+    let server = Server::start(cfg).await.unwrap();
+    stream_flight(&server, "first", &config, &events, want.len()).await;
+    let metrics = server.metrics().clone();
+    // Nothing more arrives: the file is closed on time, not at the next message or shutdown.
+    assert!(
+        common::eventually(Duration::from_secs(5), || metrics.record_files.get() >= 1).await,
+        "no file closed by time"
+    );
+    stream_flight(&server, "second", &config, &events, want.len()).await;
+    server.shutdown().await.unwrap();
+    let files = recordings(dir.path());
+    assert!(files.len() >= 2, "{files:?}");
+    // The first vehicle's poses are in the first file, the second's in a later one.
+    assert_eq!(recorded_poses(&files[0], "first").len(), want.len());
+    let last = files.last().unwrap();
+    assert_eq!(recorded_poses(last, "second").len(), want.len());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_full_disk_sheds_and_counts_and_estimation_goes_on() {
+    let full = Path::new("/dev/full");
+    if !full.exists() {
+        eprintln!("skipping: no /dev/full on this system (a device whose writes fail with ENOSPC)");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let (config, events) = common::sim_flight("smoke", 2.0);
+    let want = offline(&config, &events);
+    let server = Server::start(record_config(dir.path())).await.unwrap();
+    // Every file the recorder will open is the full device: each write fails with ENOSPC.
+    for i in 0..50 {
+        std::os::unix::fs::symlink(full, uavnavd::record::file_path(dir.path(), i)).unwrap();
+    }
+    let got = stream_flight(&server, "full", &config, &events, want.len()).await;
+    assert_eq!(got, want, "the poses changed with a full disk");
+    let metrics = server.metrics().clone();
+    server.shutdown().await.unwrap();
+    // Everything handed to the recorder was lost, and all of it is counted.
+    let lost = metrics
+        .record_dropped
+        .get_or_create(&RecordDropLabels {
+            reason: RecordDrop::WriteError,
+        })
+        .get();
+    let written = metrics.record_written.get();
+    assert!(lost > 0, "nothing counted as write_error");
+    assert!(lost >= written, "{lost} counted lost of {written} handed to files");
+    assert_eq!(metrics.record_files.get(), 0, "a file on a full disk was finished");
 }
