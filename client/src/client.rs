@@ -25,7 +25,7 @@ use crate::backoff::Backoff;
 use crate::endpoint::Endpoint;
 use crate::error::{ClientError, check_vehicle_id};
 use crate::grpc::{self, RawClient};
-use crate::ingest::{Ingest, IngestStats, Sink, spawn_grpc_driver};
+use crate::ingest::{Configs, Ingest, IngestStats, Sink, spawn_grpc_driver};
 use crate::keys::Leaf;
 use crate::pb;
 use crate::security::TlsOptions;
@@ -98,6 +98,9 @@ pub struct Client {
     endpoint: Endpoint,
     backend: Backend,
     opts: ConnectOptions,
+    /// The vehicle configurations given through this client (and its clones), re-sent first
+    /// when an ingest stream reopens (a restarted service has lost them).
+    configs: Configs,
 }
 
 impl Client {
@@ -123,6 +126,7 @@ impl Client {
             endpoint: endpoint.clone(),
             backend,
             opts,
+            configs: Configs::default(),
         })
     }
 
@@ -212,10 +216,13 @@ impl Client {
     ) -> Result<Option<bool>, ClientError> {
         check_vehicle_id(id)?;
         match &self.backend {
-            Backend::Grpc(c) => self
-                .retry("ConfigureVehicle", || grpc::configure(c, id, config))
-                .await
-                .map(Some),
+            Backend::Grpc(c) => {
+                let created = self
+                    .retry("ConfigureVehicle", || grpc::configure(c, id, config))
+                    .await?;
+                self.configs.remember(id, config);
+                Ok(Some(created))
+            }
             #[cfg(feature = "zenoh")]
             Backend::Zenoh(s) => zenoh_backend::configure(s, id, config).await.map(|()| None),
             Backend::Discard => Ok(None),
@@ -337,6 +344,7 @@ impl Client {
                     rx,
                     Arc::clone(&stats),
                     self.opts.backoff.clone(),
+                    self.configs.clone(),
                 );
                 Ingest::new(Sink::Grpc(tx), stats, Some(task))
             }

@@ -3,7 +3,11 @@
 //!
 //! Over gRPC an `Ingest` is one `Ingest` bidirectional stream; a task reads the acks (so flow
 //! control never stalls the sender) and reopens the stream with backoff when it breaks. Envelopes
-//! in flight at a break are lost and counted (`sent - acked`). Over Zenoh each message is a `put`
+//! in flight at a break are lost and counted (`sent - acked`). A reopened stream first re-sends
+//! every vehicle configuration this client gave (in the stream or by `Client::configure`), so a
+//! service that restarted has them before the data (the service ignores a configuration a
+//! vehicle already runs with, so a stream that broke without a restart loses nothing by it);
+//! counted in [`IngestStats::configs_resent`]. Over Zenoh each message is a `put`
 //! on the vehicle's key (congestion control `Block`: never dropped locally); there are no acks.
 //!
 //! Refusals are not retried: an ack `PERMISSION_DENIED` (a vehicle outside the caller's grants)
@@ -37,6 +41,8 @@ pub struct IngestStats {
     pub accepted: AtomicU64,
     /// Stream reopenings.
     pub reconnects: AtomicU64,
+    /// Vehicle configurations re-sent at the start of a reopened stream.
+    pub configs_resent: AtomicU64,
     /// Messages handed to the transport per input kind, indexed like [`Leaf::INPUTS`].
     sent_by_leaf: [AtomicU64; Leaf::INPUTS.len()],
     /// Acks with status OK (kept apart from `statuses`: the hot path takes no lock).
@@ -390,24 +396,85 @@ impl Ingest {
     }
 }
 
-/// The gRPC ingest driver: opens the stream, reads acks, reopens on failure.
+/// The sequence number of a re-sent configuration (the senders number from 0 up, so it is
+/// never theirs); its ack is not counted as one of the user's.
+const RESENT_SEQUENCE: u64 = u64::MAX;
+
+/// The latest configuration given for each vehicle (shared by a client's clones and its ingest
+/// streams; a few hundred bytes per vehicle).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Configs(Arc<Mutex<BTreeMap<String, pb::VehicleConfig>>>);
+
+impl Configs {
+    pub(crate) fn remember(&self, id: &str, config: &pb::VehicleConfig) {
+        if let Ok(mut m) = self.0.lock() {
+            m.insert(id.to_string(), config.clone());
+        }
+    }
+
+    /// Every remembered configuration as an envelope to re-send.
+    fn envelopes(&self) -> Vec<pb::SensorEnvelope> {
+        let Ok(m) = self.0.lock() else {
+            return Vec::new();
+        };
+        m.iter()
+            .map(|(id, c)| pb::SensorEnvelope {
+                vehicle_id: id.clone(),
+                sequence: RESENT_SEQUENCE,
+                payload: Some(Payload::Config(c.clone())),
+            })
+            .collect()
+    }
+}
+
+/// The gRPC ingest driver: opens the stream, reads acks, reopens on failure (re-sending the
+/// vehicles' configurations first).
 pub(crate) fn spawn_grpc_driver(
     client: crate::grpc::RawClient,
     user_rx: mpsc::Receiver<pb::SensorEnvelope>,
     stats: Arc<IngestStats>,
     backoff: crate::Backoff,
+    configs: Configs,
 ) -> JoinHandle<()> {
     let shared = Arc::new(tokio::sync::Mutex::new(user_rx));
     tokio::spawn(async move {
         let mut attempt = 0u32;
+        let mut reopened = false;
         loop {
             let closed = Arc::new(std::sync::atomic::AtomicBool::new(false));
-            let requests = request_stream(Arc::clone(&shared), Arc::clone(&closed));
+            let resend = if reopened {
+                configs.envelopes()
+            } else {
+                Vec::new()
+            };
+            stats
+                .configs_resent
+                .fetch_add(resend.len() as u64, Ordering::Relaxed);
+            let requests = request_stream(
+                Arc::clone(&shared),
+                Arc::clone(&closed),
+                resend,
+                configs.clone(),
+            );
+            reopened = true;
             let last = match client.clone().ingest(requests).await {
                 Ok(resp) => {
                     let mut acks = resp.into_inner();
                     loop {
                         match acks.message().await {
+                            Ok(Some(ack)) if ack.sequence == RESENT_SEQUENCE => {
+                                if ack.status != pb::IngestStatus::Accepted as i32 {
+                                    tracing::warn!(
+                                        vehicle = ack.vehicle_id,
+                                        reason = ack.reason,
+                                        "a re-sent vehicle configuration was refused"
+                                    );
+                                    stats.error(format!(
+                                        "re-sent configuration of {:?} refused: {}",
+                                        ack.vehicle_id, ack.reason
+                                    ));
+                                }
+                            }
                             Ok(Some(ack)) => {
                                 attempt = 0;
                                 stats.ack(&ack);
@@ -459,19 +526,31 @@ fn refuse(stats: &IngestStats, status: tonic::Status) {
     stats.is_refused.store(true, Ordering::Release);
 }
 
-/// The request side: pulls from the user's channel; marks `closed` when the user is done.
+/// The request side: the re-sent configurations, then the user's channel (remembering the
+/// configurations it carries); marks `closed` when the user is done.
 fn request_stream(
     shared: Arc<tokio::sync::Mutex<mpsc::Receiver<pb::SensorEnvelope>>>,
     closed: Arc<std::sync::atomic::AtomicBool>,
+    resend: Vec<pb::SensorEnvelope>,
+    configs: Configs,
 ) -> impl futures::Stream<Item = pb::SensorEnvelope> + Send + 'static {
-    futures::stream::unfold((shared, closed), |(shared, closed)| async move {
-        let next = shared.lock().await.recv().await;
-        match next {
-            Some(env) => Some((env, (shared, closed))),
-            None => {
-                closed.store(true, Ordering::Release);
-                None
+    let user = futures::stream::unfold(
+        (shared, closed, configs),
+        |(shared, closed, configs)| async move {
+            let next = shared.lock().await.recv().await;
+            match next {
+                Some(env) => {
+                    if let Some(Payload::Config(c)) = &env.payload {
+                        configs.remember(&env.vehicle_id, c);
+                    }
+                    Some((env, (shared, closed, configs)))
+                }
+                None => {
+                    closed.store(true, Ordering::Release);
+                    None
+                }
             }
-        }
-    })
+        },
+    );
+    futures::StreamExt::chain(futures::stream::iter(resend), user)
 }

@@ -443,11 +443,19 @@ impl Ingestor {
             .registry
             .get_or_create(id, Some(&config))
             .map_err(registry_rejection)?;
+        let same = {
+            let mut current = h.shared.config.lock().unwrap_or_else(|p| p.into_inner());
+            let same = !created && current.as_deref() == Some(&config);
+            if !same {
+                *current = Some(Arc::new(config.clone()));
+            }
+            same
+        };
         h.shared.set_camera(spec);
         h.shared
             .configured
             .store(true, std::sync::atomic::Ordering::Relaxed);
-        if !created {
+        if !created && !same {
             let (tx, rx) = tokio::sync::oneshot::channel();
             self.send(
                 &h,

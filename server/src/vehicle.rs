@@ -5,6 +5,7 @@ use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU64, AtomicUsize, Ordering}
 use std::sync::{Arc, Mutex, RwLock};
 
 use tokio::sync::watch;
+use uavnav_core::VehicleConfig;
 use uavnav_proto::v1 as pb;
 
 use crate::validate::CameraSpec;
@@ -324,6 +325,9 @@ pub struct VehicleShared {
     pub camera: RwLock<Option<CameraSpec>>,
     /// Whether a configuration was given.
     pub configured: AtomicBool,
+    /// The configuration the engine runs with, when one was given: the same one again changes
+    /// nothing (a client re-sends it when its stream reopens, which must not reset the filter).
+    pub config: Mutex<Option<Arc<VehicleConfig>>>,
     /// Camera frames in the actor's queue (bounded by `vehicles.camera_queue`; beyond, shed).
     pub frames_queued: AtomicUsize,
     /// Their compressed bytes (bounded by `vehicles.camera_queue_bytes`).
@@ -346,6 +350,7 @@ impl VehicleShared {
             gate: Mutex::new(TimeGate::default()),
             camera: RwLock::new(None),
             configured: AtomicBool::new(false),
+            config: Mutex::new(None),
             frames_queued: AtomicUsize::new(0),
             frame_bytes_queued: AtomicUsize::new(0),
             last_input_wall_ns: AtomicI64::new(0),

@@ -274,6 +274,13 @@ async fn a_full_disk_sheds_and_counts_and_estimation_goes_on() {
         .get();
     let written = metrics.record_written.get();
     assert!(lost > 0, "nothing counted as write_error");
-    assert!(lost >= written, "{lost} counted lost of {written} handed to files");
-    assert_eq!(metrics.record_files.get(), 0, "a file on a full disk was finished");
+    assert!(
+        lost >= written,
+        "{lost} counted lost of {written} handed to files"
+    );
+    assert_eq!(
+        metrics.record_files.get(),
+        0,
+        "a file on a full disk was finished"
+    );
 }

@@ -1,0 +1,80 @@
+//! A service restarted under a feeding client (issue row 10: the client reconnected and resent
+//! its data but not the vehicle's configuration, so camera frames were refused and poses lost):
+//! the reopened ingest stream re-sends the configurations first, and the new service runs the
+//! vehicle with them.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
+
+mod common;
+
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use common::*;
+use uavnav_client::{Client, ConnectOptions};
+use uavnav_tests::net::eventually;
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_reopened_stream_resends_the_vehicle_configurations() {
+    let port = free_port();
+    let mut cfg = loopback_config();
+    cfg.grpc.addr = std::net::SocketAddr::from(([127, 0, 0, 1], port));
+    let first = uavnavd::Server::start(cfg.clone()).await.unwrap();
+    let url = format!("grpc://127.0.0.1:{port}");
+    let client = Client::connect(&url.parse().unwrap(), ConnectOptions::default())
+        .await
+        .unwrap();
+    let (config, msgs) = flight(4.0);
+    // One vehicle configured by the unary call, one inside the stream.
+    client.configure("rs-unary", &config).await.unwrap();
+    let ingest = client.ingest().await.unwrap();
+    ingest
+        .send(
+            "rs-stream",
+            uavnav_client::pb::sensor_envelope::Payload::Config(config.clone()),
+        )
+        .await
+        .unwrap();
+    let half = msgs.len() / 2;
+    for m in &msgs[..half] {
+        ingest.send("rs-unary", m.clone()).await.unwrap();
+        ingest.send("rs-stream", m.clone()).await.unwrap();
+    }
+    let stats = std::sync::Arc::clone(ingest.stats());
+    let all = 1 + 2 * half as u64;
+    assert!(
+        eventually(Duration::from_secs(20), || stats
+            .acked
+            .load(Ordering::Relaxed)
+            == all)
+        .await
+    );
+    assert_eq!(stats.configs_resent.load(Ordering::Relaxed), 0);
+
+    // The service restarts (a new process would be the same: nothing of the vehicles survives).
+    first.shutdown().await.unwrap();
+    let second = uavnavd::Server::start(cfg).await.unwrap();
+    assert!(second.registry().get("rs-unary").is_none());
+    for m in &msgs[half..] {
+        ingest.send("rs-unary", m.clone()).await.unwrap();
+        ingest.send("rs-stream", m.clone()).await.unwrap();
+    }
+    let stats = ingest.finish(Duration::from_secs(30)).await;
+    assert!(stats.reconnects.load(Ordering::Relaxed) >= 1);
+    assert_eq!(stats.configs_resent.load(Ordering::Relaxed), 2);
+    assert!(
+        stats.errors().keys().all(|e| !e.contains("re-sent")),
+        "{:?}",
+        stats.errors()
+    );
+    for id in ["rs-unary", "rs-stream"] {
+        let h = second.registry().get(id).unwrap();
+        assert!(
+            h.shared.configured.load(Ordering::Relaxed),
+            "{id}: created by data, without its configuration"
+        );
+        let running = h.shared.config.lock().unwrap().clone().unwrap();
+        let given = uavnav_core::VehicleConfig::try_from(&config).unwrap();
+        assert_eq!(*running, given, "{id}");
+    }
+    second.shutdown().await.unwrap();
+}
