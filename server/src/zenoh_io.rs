@@ -543,9 +543,13 @@ impl Outputs {
         .await;
     }
 
-    /// Congestion control `Block`: this task alone waits for a slow link, never an actor; when it
-    /// falls behind, the broadcast it reads from lags and counts what was skipped
-    /// (`zenoh_output_lagged`), instead of Zenoh dropping samples silently.
+    /// Congestion control `Drop`: a link whose queue is full (a subscriber that stopped reading,
+    /// or slower than the fleet's outputs) loses what it cannot take, and only that link: Zenoh
+    /// marks it congested and drops for it at once, while every other link gets every sample.
+    /// With `Block` this one task waited on the slowest link, up to Zenoh's 5 s before it closes
+    /// a blocked link, and every subscriber went without poses meanwhile. Zenoh counts no such
+    /// drops where the service can read them; what this task itself falls behind on is counted
+    /// (`zenoh_output_lagged`).
     async fn put(&self, key: String, body: Vec<u8>, enc: &Encoding) {
         let put = self
             .session
@@ -553,7 +557,7 @@ impl Outputs {
             .encoding(enc.clone())
             // Not to this session's own input subscriber (`*/*` matches `*/pose`): only others.
             .allowed_destination(zenoh::sample::Locality::Remote)
-            .congestion_control(zenoh::qos::CongestionControl::Block);
+            .congestion_control(zenoh::qos::CongestionControl::Drop);
         if let Err(e) = put.await {
             debug!(key, error = %e, "zenoh put failed");
         }
