@@ -281,6 +281,7 @@ pub fn spawn(
         ctx,
         span,
         divergence_resets: 0,
+        busy_reports: 2,
     };
     tokio::spawn(async move {
         let evicted = actor.run(rx).await;
@@ -308,7 +309,62 @@ struct Actor {
     span: Span,
     /// The engine's divergence resets at the last health report (the metric counts the new ones).
     divergence_resets: u64,
+    /// Reports still due at every period: a message makes it 2 (the report covering it, and the
+    /// next, whose rates show the vehicle went quiet).
+    busy_reports: u8,
 }
+
+/// The health ticks of one actor: start + k * period.
+#[derive(Debug)]
+struct Ticks {
+    start: tokio::time::Instant,
+    period: Duration,
+    /// The tick the timer is set for.
+    scheduled: u64,
+    /// The tick of the last report.
+    reported: u64,
+    /// The timer is set beyond the next period (the vehicle was idle at the last tick).
+    idle: bool,
+}
+
+impl Ticks {
+    fn new(start: tokio::time::Instant, period: Duration) -> Self {
+        Self {
+            start,
+            period: period.max(Duration::from_millis(1)),
+            scheduled: 0,
+            reported: 0,
+            idle: false,
+        }
+    }
+
+    fn at(&self, k: u64) -> tokio::time::Instant {
+        let ns = self.period.as_nanos().saturating_mul(u128::from(k));
+        self.start + Duration::from_nanos(u64::try_from(ns).unwrap_or(u64::MAX / 2))
+    }
+
+    /// The tick `t` is in (the last one at or before it).
+    fn index_at(&self, t: tokio::time::Instant) -> u64 {
+        let since = t.saturating_duration_since(self.start).as_nanos();
+        u64::try_from(since / self.period.as_nanos()).unwrap_or(u64::MAX / 2)
+    }
+
+    /// The first tick after `t`.
+    fn next_after(&self, t: tokio::time::Instant) -> u64 {
+        self.index_at(t) + 1
+    }
+
+    /// The first tick at or after `t`.
+    fn index_at_or_after(&self, t: tokio::time::Instant) -> u64 {
+        let k = self.index_at(t);
+        if self.at(k) >= t { k } else { k + 1 }
+    }
+}
+
+/// An idle vehicle (no message for a whole period, nothing held) reports its health once in this
+/// many periods instead of every period: an idle fleet costs next to nothing, and a watcher
+/// still sees each idle vehicle alive (10 s at the default period).
+pub const IDLE_HEALTH_EVERY: u32 = 10;
 
 async fn recv_vision(
     pending: &mut Option<oneshot::Receiver<VisionResult>>,
@@ -322,8 +378,12 @@ async fn recv_vision(
 impl Actor {
     /// The event loop; returns whether the actor was evicted for idleness.
     async fn run(mut self, mut rx: mpsc::Receiver<Msg>) -> bool {
-        let mut tick = tokio::time::interval(self.ctx.health_period);
-        tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+        // Health ticks fall on start + k * period. An active vehicle wakes at every one; an idle
+        // one only at the tick of its next report or of its eviction, so an idle fleet costs no
+        // wake-ups in between. Input brings the next tick back to the coming period.
+        let mut ticks = Ticks::new(tokio::time::Instant::now(), self.ctx.health_period);
+        let tick = tokio::time::sleep_until(ticks.at(0));
+        tokio::pin!(tick);
         let idle = Duration::from_secs_f64(self.ctx.vehicles.idle_evict_s);
         // An idle stream's last window is flushed after this much wall time without input.
         let flush_after =
@@ -347,13 +407,40 @@ impl Actor {
                         if self.take_queued(&mut rx) {
                             break false;
                         }
+                        // Only an idle actor's timer is far off (the hot path reads no clock).
+                        if ticks.idle {
+                            ticks.idle = false;
+                            let next = ticks.next_after(tokio::time::Instant::now());
+                            if next < ticks.scheduled {
+                                ticks.scheduled = next;
+                                tick.as_mut().reset(ticks.at(next));
+                            }
+                        }
                     }
                 },
-                _ = tick.tick() => {
-                    self.publish_health();
-                    if mono_now().saturating_duration_since(self.last_input) >= idle && self.pending.is_none() {
+                () = &mut tick => {
+                    // A late wake-up (a busy runtime) counts as the tick it is in.
+                    let k = ticks.scheduled.max(ticks.index_at(tokio::time::Instant::now()));
+                    let busy = self.busy_reports > 0 || !self.buffer.is_empty() || self.pending.is_some();
+                    if busy || k >= ticks.reported + u64::from(IDLE_HEALTH_EVERY) {
+                        self.busy_reports = self.busy_reports.saturating_sub(1);
+                        ticks.reported = k;
+                        self.publish_health();
+                    }
+                    let evict_at = self.last_input + idle;
+                    if mono_now() >= evict_at && self.pending.is_none() {
                         break true;
                     }
+                    let still_busy = self.busy_reports > 0 || !self.buffer.is_empty() || self.pending.is_some();
+                    ticks.idle = !still_busy;
+                    ticks.scheduled = if still_busy {
+                        k + 1
+                    } else {
+                        let report = ticks.reported + u64::from(IDLE_HEALTH_EVERY);
+                        let evict = ticks.index_at_or_after(tokio::time::Instant::from_std(evict_at));
+                        report.min(evict).max(k + 1)
+                    };
+                    tick.as_mut().reset(ticks.at(ticks.scheduled));
                 }
                 () = &mut flush, if !self.buffer.is_empty() => {
                     let (due, now) = (self.last_input + flush_after, mono_now());
@@ -416,6 +503,7 @@ impl Actor {
     }
 
     fn on_msg(&mut self, msg: Msg) {
+        self.busy_reports = 2;
         match msg {
             Msg::Data(batch) => {
                 self.last_input = mono_now();

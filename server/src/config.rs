@@ -349,7 +349,7 @@ impl VisionConfig {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct HealthConfig {
-    /// Per-vehicle health publication period, ms.
+    /// Per-vehicle health publication period, ms (an idle vehicle: once in ten periods).
     pub period_ms: u64,
 }
 

@@ -1,7 +1,8 @@
 //! The vehicle actors' timing on a paused clock (`uavnav_tests::paused`): idle eviction after
 //! `vehicles.idle_evict_s` frees a slot for a new vehicle while an active vehicle stays, and
-//! health reports come once per `health.period_ms` with rates over exactly that period — checked
-//! to the tick, in no real time.
+//! health reports come once per `health.period_ms` with rates over exactly that period while the
+//! vehicle is active, once in ten periods while it is idle — checked to the tick, in no real
+//! time.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use std::time::Duration;
@@ -87,8 +88,15 @@ async fn health_comes_once_per_period_with_rates_over_that_period() {
         .collect();
     assert_eq!(rates, [50.0, 0.0]);
 
-    // Ten more periods give ten more reports, no more, no fewer.
+    // Idle since: one report in ten periods (an idle fleet costs next to nothing), no more, no
+    // fewer.
     fleet.run_for(10 * S).await;
-    assert_eq!(fleet.health_reports().len(), 10);
+    assert_eq!(fleet.health_reports().len(), 1);
+    fleet.run_for(20 * S).await;
+    assert_eq!(fleet.health_reports().len(), 2);
     assert!(next.iter().all(|h| h.vehicle_id == "uav"));
+    // Input again: every period again.
+    assert!(accepted(&fleet.imu("uav", 10).await));
+    fleet.run_for(3 * S).await;
+    assert_eq!(fleet.health_reports().len(), 2);
 }
