@@ -408,7 +408,7 @@ pub(crate) struct Configs(Arc<Mutex<BTreeMap<String, pb::VehicleConfig>>>);
 impl Configs {
     pub(crate) fn remember(&self, id: &str, config: &pb::VehicleConfig) {
         if let Ok(mut m) = self.0.lock() {
-            m.insert(id.to_string(), config.clone());
+            m.insert(id.to_string(), *config);
         }
     }
 
@@ -421,7 +421,7 @@ impl Configs {
             .map(|(id, c)| pb::SensorEnvelope {
                 vehicle_id: id.clone(),
                 sequence: RESENT_SEQUENCE,
-                payload: Some(Payload::Config(c.clone())),
+                payload: Some(Payload::Config(*c)),
             })
             .collect()
     }

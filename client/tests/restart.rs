@@ -30,7 +30,7 @@ async fn a_reopened_stream_resends_the_vehicle_configurations() {
     ingest
         .send(
             "rs-stream",
-            uavnav_client::pb::sensor_envelope::Payload::Config(config.clone()),
+            uavnav_client::pb::sensor_envelope::Payload::Config(config),
         )
         .await
         .unwrap();

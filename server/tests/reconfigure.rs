@@ -37,10 +37,10 @@ async fn the_same_configuration_again_keeps_the_engine() {
         config: Some(config),
     };
     let first = vehicle_config(false);
-    let created = c.configure_vehicle(configure(first.clone())).await.unwrap();
+    let created = c.configure_vehicle(configure(first)).await.unwrap();
     assert!(created.into_inner().created);
     assert_eq!(factory.0.load(Ordering::Relaxed), 1);
-    let again = c.configure_vehicle(configure(first.clone())).await.unwrap();
+    let again = c.configure_vehicle(configure(first)).await.unwrap();
     assert!(!again.into_inner().created);
     assert_eq!(
         factory.0.load(Ordering::Relaxed),
