@@ -281,6 +281,7 @@ pub fn spawn(
         ctx,
         span,
         divergence_resets: 0,
+        imu_clipped: 0,
         busy_reports: 2,
     };
     tokio::spawn(async move {
@@ -309,6 +310,8 @@ struct Actor {
     span: Span,
     /// The engine's divergence resets at the last health report (the metric counts the new ones).
     divergence_resets: u64,
+    /// The engine's clipped IMU samples at the last health report (likewise).
+    imu_clipped: u64,
     /// Reports still due at every period: a message makes it 2 (the report covering it, and the
     /// next, whose rates show the vehicle went quiet).
     busy_reports: u8,
@@ -721,6 +724,17 @@ impl Actor {
             warn!(parent: &self.span, resets, "estimator diverged (non-finite state) and was reset");
         }
         self.divergence_resets = resets;
+        // A reset or reconfiguration starts the engine's count again.
+        if engine.imu_clipped < self.imu_clipped {
+            self.imu_clipped = 0;
+        }
+        if engine.imu_clipped > self.imu_clipped {
+            self.ctx
+                .metrics
+                .imu_clipped
+                .inc_by(engine.imu_clipped - self.imu_clipped);
+            self.imu_clipped = engine.imu_clipped;
+        }
         let report =
             Arc::new(
                 self.window

@@ -37,6 +37,8 @@ pub struct EngineHealth {
     /// Estimator restarts after a divergence (a non-finite state, or the paper profile's tilt
     /// check) so far.
     pub divergence_resets: u64,
+    /// IMU samples the estimator found clipped (at the sensor's range) so far.
+    pub imu_clipped: u64,
 }
 
 /// The result of a vision job, handed back to the engine that created it.

@@ -102,6 +102,7 @@ impl HealthWindow {
                 mag_accepted: count(InputKind::Mag),
                 baro_accepted: count(InputKind::Baro),
                 camera_accepted: count(InputKind::Camera),
+                imu_clipped: engine.imu_clipped,
             }),
             vision: if shared.camera().is_some() {
                 self.last_vision

@@ -273,6 +273,8 @@ pub struct Metrics {
     pub frames_rejected: Family<FrameRejectLabels, Counter>,
     /// Estimator resets after a non-finite state (the vehicle reported DIVERGED).
     pub divergence_resets: Counter,
+    /// IMU samples the estimators found clipped (at the sensor's range), all vehicles.
+    pub imu_clipped: Counter,
     /// Authentication and authorization refusals, TLS handshake failures.
     pub security: crate::security::SecurityMetrics,
     /// Connections open, refused and closed, by listener.
@@ -427,6 +429,12 @@ impl Metrics {
         );
         let security = crate::security::SecurityMetrics::register(&mut registry);
         let connections = crate::conn::ConnectionMetrics::register(&mut registry);
+        let imu_clipped = Counter::default();
+        registry.register(
+            "imu_clipped",
+            "IMU samples the estimators found clipped (at the sensor's range; fused with inflated noise)",
+            imu_clipped.clone(),
+        );
         let admission_evictions = Counter::default();
         registry.register(
             "admission_evictions",
@@ -460,6 +468,7 @@ impl Metrics {
             clock_resyncs,
             frames_rejected,
             divergence_resets,
+            imu_clipped,
             security,
             connections,
             admission_evictions,

@@ -142,6 +142,7 @@ impl Engine for RunnerEngine {
             vision_gate_rejections: h.vision_rot.rejected + h.vision_trans.rejected,
             engine_dropped: h.inputs_rejected + h.late_dropped + v.abandoned,
             divergence_resets: u64::from(h.divergence_resets),
+            imu_clipped: h.imu_clipped,
         }
     }
 

@@ -153,3 +153,62 @@ async fn zenoh_flight_equals_offline_estimate() {
     z.close().await.unwrap();
     server.shutdown().await.unwrap();
 }
+
+/// IMU samples at the sensor's range (a hard landing, a strike) are counted by the estimator and
+/// reach the vehicle's health and `/metrics`.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn clipped_imu_samples_reach_health_and_metrics() {
+    let (config, mut events) = common::sim_flight("smoke", 3.0);
+    // 20 consecutive samples two seconds in read 200 m/s² (beyond the 15.5 g default range).
+    let (mut k, mut n) = (0, 0);
+    for e in events.iter_mut() {
+        if let SensorEvent::Imu(s) = e {
+            k += 1;
+            if (400..420).contains(&k) {
+                s.accel_mps2.x = 200.0;
+                n += 1;
+            }
+        }
+    }
+    assert_eq!(n, 20);
+    let server = Server::start(test_config()).await.unwrap();
+    let mut c = common::client(&server).await;
+    c.configure_vehicle(pb::ConfigureVehicleRequest {
+        vehicle_id: "clip".into(),
+        config: Some((&config).into()),
+    })
+    .await
+    .unwrap();
+    let envs: Vec<_> = events
+        .iter()
+        .enumerate()
+        .map(|(i, e)| envelope("clip", i as u64, e))
+        .collect();
+    let acks = common::ingest(&mut c, envs).await.unwrap();
+    assert!(
+        acks.iter()
+            .all(|a| a.status == pb::IngestStatus::Accepted as i32)
+    );
+    let h = server.registry().get("clip").unwrap();
+    let clipped = || {
+        h.shared
+            .latest_health
+            .borrow()
+            .as_ref()
+            .and_then(|r| r.counters)
+            .map_or(0, |c| c.imu_clipped)
+    };
+    assert!(
+        common::eventually(Duration::from_secs(10), || clipped() >= 19).await,
+        "health says {} clipped",
+        clipped()
+    );
+    assert_eq!(server.metrics().imu_clipped.get(), clipped());
+    assert!(
+        server
+            .metrics()
+            .encode()
+            .contains("uavnav_imu_clipped_total")
+    );
+    server.shutdown().await.unwrap();
+}
