@@ -229,12 +229,18 @@ pub struct ZenohConfig {
     pub listen: Vec<String>,
     /// Endpoints to connect to.
     pub connect: Vec<String>,
-    /// A Zenoh JSON5 config file used as the base; `mode`, `listen` and `connect` are applied on top.
+    /// A Zenoh JSON5 config file used as the base; `mode`, `listen`, `connect`,
+    /// `multicast_scouting` and `stalled_link_ms` are applied on top.
     pub config_file: Option<PathBuf>,
     /// Multicast scouting (discovering peers on the LAN). Tests turn it off.
     pub multicast_scouting: bool,
     /// Instance name in the `uavnav/v1/service/{instance}` liveliness token ("" = host-pid).
     pub instance: String,
+    /// How long a pose or health report waits for room in a subscriber link's full send queue
+    /// before that link is taken as stalled and loses what it cannot take (until it drains), ms.
+    /// Long enough that a healthy link on a busy machine never loses a sample; the other links
+    /// are never held (Zenoh's `congestion_control/drop/wait_before_drop`).
+    pub stalled_link_ms: f64,
 }
 
 impl Default for ZenohConfig {
@@ -247,6 +253,7 @@ impl Default for ZenohConfig {
             config_file: None,
             multicast_scouting: true,
             instance: String::new(),
+            stalled_link_ms: 50.0,
         }
     }
 }
@@ -664,6 +671,9 @@ impl Config {
             return bad(
                 "vision.max_camera_width_px and vision.max_camera_height_px must be in [1, 16384], vision.max_camera_pixels > 0",
             );
+        }
+        if !(self.zenoh.stalled_link_ms >= 0.0 && self.zenoh.stalled_link_ms <= 10_000.0) {
+            return bad("zenoh.stalled_link_ms must be in [0, 10000]");
         }
         if self.health.period_ms == 0 {
             return bad("health.period_ms must be > 0");

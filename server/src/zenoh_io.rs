@@ -74,6 +74,11 @@ pub fn session_config(cfg: &ZenohConfig, sec: &SecurityConfig) -> anyhow::Result
         "scouting/multicast/enabled",
         cfg.multicast_scouting.to_string(),
     )?;
+    set(
+        &mut z,
+        "transport/link/tx/queue/congestion_control/drop/wait_before_drop",
+        format!("{}", (cfg.stalled_link_ms * 1e3).round() as i64),
+    )?;
     crate::security::zenoh::apply(&mut z, sec)?;
     Ok(z)
 }

@@ -29,6 +29,32 @@ fn envelope(id: &str, seq: u64, e: &SensorEvent) -> pb::SensorEnvelope {
     }
 }
 
+/// Configures `id` over gRPC and streams `events` to it, one envelope each; every one accepted.
+async fn configure_and_feed(
+    server: &uavnavd::RunningServer,
+    id: &str,
+    config: &uavnav_core::VehicleConfig,
+    events: &[SensorEvent],
+) {
+    let mut c = common::client(server).await;
+    c.configure_vehicle(pb::ConfigureVehicleRequest {
+        vehicle_id: id.into(),
+        config: Some(config.into()),
+    })
+    .await
+    .unwrap();
+    let envs: Vec<_> = events
+        .iter()
+        .enumerate()
+        .map(|(i, e)| envelope(id, i as u64, e))
+        .collect();
+    let acks = common::ingest(&mut c, envs).await.unwrap();
+    assert_eq!(acks.len(), events.len());
+    for a in &acks {
+        assert_eq!(a.status, pb::IngestStatus::Accepted as i32, "{a:?}");
+    }
+}
+
 fn strip(mut p: pb::PoseEstimate) -> pb::PoseEstimate {
     p.vehicle_id.clear();
     p.ingest_wall_ns = 0;
@@ -70,32 +96,7 @@ async fn grpc_flight_equals_offline_estimate() {
 
     let server = Server::start(test_config()).await.unwrap();
     let mut rx = server.registry().ctx().hub.poses.subscribe();
-    let mut c = common::client(&server).await;
-    c.configure_vehicle(pb::ConfigureVehicleRequest {
-        vehicle_id: "e2e".into(),
-        config: Some((&config).into()),
-    })
-    .await
-    .unwrap();
-    let envs: Vec<_> = events
-        .iter()
-        .enumerate()
-        .map(|(i, e)| envelope("e2e", i as u64, e))
-        .collect();
-    let n = envs.len();
-    let mut acks = c
-        .ingest(futures::stream::iter(envs))
-        .await
-        .unwrap()
-        .into_inner();
-    let mut accepted = 0;
-    while let Some(a) = acks.message().await.unwrap() {
-        assert_eq!(a.status, pb::IngestStatus::Accepted as i32, "{a:?}");
-        accepted += 1;
-        if accepted == n {
-            break;
-        }
-    }
+    configure_and_feed(&server, "e2e", &config, &events).await;
     let got = collect(&mut rx, want.len()).await;
     assert_same(&got, &want);
     server.shutdown().await.unwrap();
@@ -172,23 +173,7 @@ async fn clipped_imu_samples_reach_health_and_metrics() {
     }
     assert_eq!(n, 20);
     let server = Server::start(test_config()).await.unwrap();
-    let mut c = common::client(&server).await;
-    c.configure_vehicle(pb::ConfigureVehicleRequest {
-        vehicle_id: "clip".into(),
-        config: Some((&config).into()),
-    })
-    .await
-    .unwrap();
-    let envs: Vec<_> = events
-        .iter()
-        .enumerate()
-        .map(|(i, e)| envelope("clip", i as u64, e))
-        .collect();
-    let acks = common::ingest(&mut c, envs).await.unwrap();
-    assert!(
-        acks.iter()
-            .all(|a| a.status == pb::IngestStatus::Accepted as i32)
-    );
+    configure_and_feed(&server, "clip", &config, &events).await;
     let h = server.registry().get("clip").unwrap();
     let clipped = || {
         h.shared

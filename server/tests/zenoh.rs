@@ -14,17 +14,6 @@ use uavnav_proto::keys::{self, Leaf};
 use uavnav_proto::v1 as pb;
 use zenoh::Wait;
 
-async fn peer(connect: &str) -> zenoh::Session {
-    let mut c = zenoh::Config::default();
-    c.insert_json5("mode", "\"peer\"").unwrap();
-    c.insert_json5("listen/endpoints", "[]").unwrap();
-    c.insert_json5("connect/endpoints", &format!("[\"{connect}\"]"))
-        .unwrap();
-    c.insert_json5("scouting/multicast/enabled", "false")
-        .unwrap();
-    zenoh::open(c).await.unwrap()
-}
-
 fn enc(name: &str) -> zenoh::bytes::Encoding {
     uavnavd::zenoh_io::encoding(name)
 }
@@ -35,7 +24,7 @@ async fn zenoh_round_trip() {
     let endpoint = listen_zenoh(&mut cfg);
     let instance = cfg.zenoh.instance.clone();
     let server = start(cfg).await;
-    let z = peer(&endpoint).await;
+    let z = zenoh_peer(&endpoint).await;
     let poses = z
         .declare_subscriber(keys::vehicle_key("zv", Leaf::Pose))
         .await

@@ -261,3 +261,16 @@ impl tonic::codec::Decoder for AckDecoder {
             .map_err(|e| tonic::Status::internal(e.to_string()))
     }
 }
+
+/// A Zenoh peer session that connects to `connect` only (no listener, no multicast scouting), so
+/// parallel tests never meet.
+pub async fn zenoh_peer(connect: &str) -> zenoh::Session {
+    let mut c = zenoh::Config::default();
+    c.insert_json5("mode", "\"peer\"").unwrap();
+    c.insert_json5("listen/endpoints", "[]").unwrap();
+    c.insert_json5("connect/endpoints", &format!("[\"{connect}\"]"))
+        .unwrap();
+    c.insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
+    zenoh::open(c).await.unwrap()
+}
