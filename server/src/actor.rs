@@ -317,6 +317,15 @@ struct Actor {
     busy_reports: u8,
 }
 
+/// What an engine counter gained since `last` (its value at the previous report), which it then
+/// becomes. A new engine (reset, reconfiguration) counts from 0 again: what it counted since is
+/// what it has.
+fn counted_since(last: &mut u64, now: u64) -> u64 {
+    let gained = if now >= *last { now - *last } else { now };
+    *last = now;
+    gained
+}
+
 /// The health ticks of one actor: start + k * period.
 #[derive(Debug)]
 struct Ticks {
@@ -424,8 +433,7 @@ impl Actor {
                 () = &mut tick => {
                     // A late wake-up (a busy runtime) counts as the tick it is in.
                     let k = ticks.scheduled.max(ticks.index_at(tokio::time::Instant::now()));
-                    let busy = self.busy_reports > 0 || !self.buffer.is_empty() || self.pending.is_some();
-                    if busy || k >= ticks.reported + u64::from(IDLE_HEALTH_EVERY) {
+                    if self.busy() || k >= ticks.reported + u64::from(IDLE_HEALTH_EVERY) {
                         self.busy_reports = self.busy_reports.saturating_sub(1);
                         ticks.reported = k;
                         self.publish_health();
@@ -434,9 +442,8 @@ impl Actor {
                     if mono_now() >= evict_at && self.pending.is_none() {
                         break true;
                     }
-                    let still_busy = self.busy_reports > 0 || !self.buffer.is_empty() || self.pending.is_some();
-                    ticks.idle = !still_busy;
-                    ticks.scheduled = if still_busy {
+                    ticks.idle = !self.busy();
+                    ticks.scheduled = if !ticks.idle {
                         k + 1
                     } else {
                         let report = ticks.reported + u64::from(IDLE_HEALTH_EVERY);
@@ -503,6 +510,12 @@ impl Actor {
     /// should wait for the job before taking more.
     fn backlogged(&self) -> bool {
         self.pending.is_some() && self.engine.backlog() >= uavnav_runner::DEFAULT_MAX_HELD_EVENTS
+    }
+
+    /// Whether the next tick must report: input came in the last period or the one before
+    /// (whose report shows the rates falling to zero), or inputs or a vision job are held.
+    fn busy(&self) -> bool {
+        self.busy_reports > 0 || !self.buffer.is_empty() || self.pending.is_some()
     }
 
     fn on_msg(&mut self, msg: Msg) {
@@ -715,26 +728,14 @@ impl Actor {
 
     fn publish_health(&mut self) {
         let engine = self.engine.health();
-        let resets = engine.divergence_resets;
-        if resets > self.divergence_resets {
-            self.ctx
-                .metrics
-                .divergence_resets
-                .inc_by(resets - self.divergence_resets);
-            warn!(parent: &self.span, resets, "estimator diverged (non-finite state) and was reset");
+        let resets = counted_since(&mut self.divergence_resets, engine.divergence_resets);
+        if resets > 0 {
+            self.ctx.metrics.divergence_resets.inc_by(resets);
+            warn!(parent: &self.span, resets = engine.divergence_resets,
+                "estimator diverged (non-finite state) and was reset");
         }
-        self.divergence_resets = resets;
-        // A reset or reconfiguration starts the engine's count again.
-        if engine.imu_clipped < self.imu_clipped {
-            self.imu_clipped = 0;
-        }
-        if engine.imu_clipped > self.imu_clipped {
-            self.ctx
-                .metrics
-                .imu_clipped
-                .inc_by(engine.imu_clipped - self.imu_clipped);
-            self.imu_clipped = engine.imu_clipped;
-        }
+        let clipped = counted_since(&mut self.imu_clipped, engine.imu_clipped);
+        self.ctx.metrics.imu_clipped.inc_by(clipped);
         let report =
             Arc::new(
                 self.window
@@ -745,5 +746,21 @@ impl Actor {
             .send_replace(Some(Arc::clone(&report)));
         let _ = self.ctx.hub.health.send(report);
         self.ctx.metrics.health_reports.inc();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::counted_since;
+
+    #[test]
+    fn engine_counters_are_counted_across_engine_restarts() {
+        let mut last = 0;
+        assert_eq!(counted_since(&mut last, 5), 5);
+        assert_eq!(counted_since(&mut last, 5), 0);
+        assert_eq!(counted_since(&mut last, 7), 2);
+        // A new engine counts from 0: its 3 are new.
+        assert_eq!(counted_since(&mut last, 3), 3);
+        assert_eq!(counted_since(&mut last, 4), 1);
     }
 }

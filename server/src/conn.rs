@@ -45,9 +45,8 @@ pub const LOG_EVERY: Duration = Duration::from_secs(10);
 /// File descriptors kept for everything that is not a listener's connection: the listeners,
 /// the runtime's epoll and wakers, recording files, the Foxglove live view, the vision pool.
 pub const RESERVED_FDS: u64 = 256;
-/// Zenoh's own bound on its unicast links (its `transport/unicast/max_links` per session times
-/// `max_sessions` is far larger; what a peer mode service actually opens is one link per
-/// session, at most `max_sessions`, default 1000).
+/// Descriptors for Zenoh's links: one per session, at most Zenoh's
+/// `transport/unicast/max_sessions` (default 1000).
 pub const ZENOH_FDS: u64 = 1000;
 
 /// Which listener a connection came in on (the `listener` label).
@@ -180,13 +179,6 @@ pub struct Conn {
 enum Io {
     Plain(TcpStream),
     Tls(Box<tokio_rustls::server::TlsStream<TcpStream>>),
-}
-
-impl Conn {
-    /// Who is at the other end.
-    pub fn peer(&self) -> &PeerInfo {
-        &self.info
-    }
 }
 
 /// A slot of the listener's limit; the open gauge follows it.
