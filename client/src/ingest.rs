@@ -7,7 +7,10 @@
 //! every vehicle configuration this client gave (in the stream or by `Client::configure`), so a
 //! service that restarted has them before the data (the service ignores a configuration a
 //! vehicle already runs with, so a stream that broke without a restart loses nothing by it);
-//! counted in [`IngestStats::configs_resent`]. Over Zenoh each message is a `put`
+//! counted in [`IngestStats::configs_resent`]. An ack saying `needs_config` (the service forgot
+//! a vehicle this client configured: an idle eviction, a restart the stream did not see) makes
+//! the driver re-send that vehicle's configuration in the same stream (while it is open), once until it is
+//! acknowledged, also counted there. Over Zenoh each message is a `put`
 //! on the vehicle's key (congestion control `Block`: never dropped locally); there are no acks.
 //!
 //! Refusals are not retried: an ack `PERMISSION_DENIED` (a vehicle outside the caller's grants)
@@ -41,7 +44,8 @@ pub struct IngestStats {
     pub accepted: AtomicU64,
     /// Stream reopenings.
     pub reconnects: AtomicU64,
-    /// Vehicle configurations re-sent at the start of a reopened stream.
+    /// Vehicle configurations re-sent: at the start of a reopened stream, and when an ack says
+    /// the service lost one (`needs_config`).
     pub configs_resent: AtomicU64,
     /// Messages handed to the transport per input kind, indexed like [`Leaf::INPUTS`].
     sent_by_leaf: [AtomicU64; Leaf::INPUTS.len()],
@@ -412,6 +416,16 @@ impl Configs {
         }
     }
 
+    /// The remembered configuration of vehicle `id` as an envelope to re-send, if any.
+    fn envelope(&self, id: &str) -> Option<pb::SensorEnvelope> {
+        let m = self.0.lock().ok()?;
+        m.get(id).map(|c| pb::SensorEnvelope {
+            vehicle_id: id.to_string(),
+            sequence: RESENT_SEQUENCE,
+            payload: Some(Payload::Config(*c)),
+        })
+    }
+
     /// Every remembered configuration as an envelope to re-send.
     fn envelopes(&self) -> Vec<pb::SensorEnvelope> {
         let Ok(m) = self.0.lock() else {
@@ -450,19 +464,25 @@ pub(crate) fn spawn_grpc_driver(
             stats
                 .configs_resent
                 .fetch_add(resend.len() as u64, Ordering::Relaxed);
+            let (again_tx, again_rx) = mpsc::channel(RESEND_QUEUE);
             let requests = request_stream(
                 Arc::clone(&shared),
                 Arc::clone(&closed),
                 resend,
+                again_rx,
                 configs.clone(),
             );
             reopened = true;
+            // Vehicles whose configuration was re-sent on this stream and not yet acknowledged:
+            // acks of data in flight keep saying `needs_config` until it arrives.
+            let mut pending = std::collections::BTreeSet::new();
             let last = match client.clone().ingest(requests).await {
                 Ok(resp) => {
                     let mut acks = resp.into_inner();
                     loop {
                         match acks.message().await {
                             Ok(Some(ack)) if ack.sequence == RESENT_SEQUENCE => {
+                                pending.remove(&ack.vehicle_id);
                                 if ack.status != pb::IngestStatus::Accepted as i32 {
                                     tracing::warn!(
                                         vehicle = ack.vehicle_id,
@@ -478,6 +498,20 @@ pub(crate) fn spawn_grpc_driver(
                             Ok(Some(ack)) => {
                                 attempt = 0;
                                 stats.ack(&ack);
+                                if ack.needs_config
+                                    && !pending.contains(&ack.vehicle_id)
+                                    && let Some(env) = configs.envelope(&ack.vehicle_id)
+                                    && again_tx.try_send(env).is_ok()
+                                {
+                                    // The service forgot a vehicle this client configured (an
+                                    // idle eviction, a restart behind a proxy): configure it again.
+                                    tracing::info!(
+                                        vehicle = ?ack.vehicle_id,
+                                        "the service lost this vehicle's configuration; re-sending it"
+                                    );
+                                    stats.configs_resent.fetch_add(1, Ordering::Relaxed);
+                                    pending.insert(ack.vehicle_id);
+                                }
                             }
                             Ok(None) if closed.load(Ordering::Acquire) => return,
                             Ok(None) => break "the service ended the ingest stream".to_string(),
@@ -526,24 +560,37 @@ fn refuse(stats: &IngestStats, status: tonic::Status) {
     stats.is_refused.store(true, Ordering::Release);
 }
 
+/// Configurations re-sent during a stream (on `needs_config` acks) waiting to go out; beyond,
+/// the next ack asks again.
+const RESEND_QUEUE: usize = 64;
+
 /// The request side: the re-sent configurations, then the user's channel (remembering the
-/// configurations it carries); marks `closed` when the user is done.
+/// configurations it carries) merged with configurations re-sent on the service's request
+/// (`again`, first); marks `closed` when the user is done, which ends the stream.
 fn request_stream(
     shared: Arc<tokio::sync::Mutex<mpsc::Receiver<pb::SensorEnvelope>>>,
     closed: Arc<std::sync::atomic::AtomicBool>,
     resend: Vec<pb::SensorEnvelope>,
+    again: mpsc::Receiver<pb::SensorEnvelope>,
     configs: Configs,
 ) -> impl futures::Stream<Item = pb::SensorEnvelope> + Send + 'static {
     let user = futures::stream::unfold(
-        (shared, closed, configs),
-        |(shared, closed, configs)| async move {
-            let next = shared.lock().await.recv().await;
+        (shared, closed, again, configs),
+        |(shared, closed, mut again, configs)| async move {
+            let next = tokio::select! {
+                biased;
+                Some(env) = again.recv() => Some(env),
+                // `recv` is cancel-safe: a message is never lost when the other branch wins.
+                next = async { shared.lock().await.recv().await } => next,
+            };
             match next {
                 Some(env) => {
-                    if let Some(Payload::Config(c)) = &env.payload {
+                    if let Some(Payload::Config(c)) = &env.payload
+                        && env.sequence != RESENT_SEQUENCE
+                    {
                         configs.remember(&env.vehicle_id, c);
                     }
-                    Some((env, (shared, closed, configs)))
+                    Some((env, (shared, closed, again, configs)))
                 }
                 None => {
                     closed.store(true, Ordering::Release);

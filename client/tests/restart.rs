@@ -78,3 +78,75 @@ async fn a_reopened_stream_resends_the_vehicle_configurations() {
     }
     second.shutdown().await.unwrap();
 }
+
+/// A vehicle the service forgot while the client's stream stayed open (evicted after
+/// `idle_evict_s` of silence): the next acks say `needs_config`, and the client re-sends the
+/// configuration it gave, once, in the same stream.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_forgotten_vehicle_is_configured_again() {
+    let mut cfg = loopback_config();
+    cfg.vehicles.idle_evict_s = 0.5;
+    let server = uavnavd::Server::start(cfg).await.unwrap();
+    let url = format!("grpc://{}", server.grpc_addr);
+    let client = Client::connect(&url.parse().unwrap(), ConnectOptions::default())
+        .await
+        .unwrap();
+    let (config, msgs) = flight(4.0);
+    let ingest = client.ingest().await.unwrap();
+    ingest
+        .send(
+            "evicted",
+            uavnav_client::pb::sensor_envelope::Payload::Config(config),
+        )
+        .await
+        .unwrap();
+    let half = msgs.len() / 2;
+    for m in &msgs[..half] {
+        ingest.send("evicted", m.clone()).await.unwrap();
+    }
+    let stats = std::sync::Arc::clone(ingest.stats());
+    assert!(
+        eventually(Duration::from_secs(20), || stats
+            .acked
+            .load(Ordering::Relaxed)
+            == 1 + half as u64)
+        .await
+    );
+    // Silence: the service evicts the vehicle, configuration and all.
+    assert!(
+        eventually(Duration::from_secs(10), || server
+            .registry()
+            .get("evicted")
+            .is_none())
+        .await,
+        "the vehicle was not evicted"
+    );
+    // The drone streams on: the acks of its next messages say the service lost its
+    // configuration, and the client sends it again in the same stream.
+    let quarter = half + (msgs.len() - half) / 2;
+    for m in &msgs[half..quarter] {
+        ingest.send("evicted", m.clone()).await.unwrap();
+    }
+    assert!(
+        eventually(Duration::from_secs(20), || stats
+            .configs_resent
+            .load(Ordering::Relaxed)
+            >= 1)
+        .await,
+        "no configuration was re-sent"
+    );
+    for m in &msgs[quarter..] {
+        ingest.send("evicted", m.clone()).await.unwrap();
+    }
+    let stats = ingest.finish(Duration::from_secs(30)).await;
+    assert_eq!(stats.reconnects.load(Ordering::Relaxed), 0);
+    assert_eq!(stats.configs_resent.load(Ordering::Relaxed), 1);
+    let h = server.registry().get("evicted").unwrap();
+    assert!(h.shared.configured.load(Ordering::Relaxed));
+    let running = h.shared.config.lock().unwrap().clone().unwrap();
+    assert_eq!(
+        *running,
+        uavnav_core::VehicleConfig::try_from(&config).unwrap()
+    );
+    server.shutdown().await.unwrap();
+}

@@ -11,7 +11,7 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::{OwnedSemaphorePermit, Semaphore, mpsc, oneshot};
 use tracing::{Span, debug, info_span, warn};
 use uavnav_core::{
     BaroSample, CameraFrame, GnssFix, ImuSample, MagSample, SensorEvent, VehicleConfig,
@@ -19,7 +19,7 @@ use uavnav_core::{
 
 use crate::config::VehiclesConfig;
 use crate::engine::{
-    Engine, EngineStep, FrameFailureKind, SharedFactory, VisionResult, VisionWork,
+    ActorStep, BoxedEngine, FrameFailureKind, PoolJob, SharedFactory, VisionOutcome,
 };
 use crate::health::HealthWindow;
 use crate::hub::{Hub, Pose, PoseBatch};
@@ -54,6 +54,94 @@ pub struct Ctx {
     pub factory: SharedFactory,
     /// Compressed camera bytes queued at all actors, and their limit (`vision.queue_bytes`).
     pub camera_bytes: CameraBytes,
+    /// Decoded sensor bytes queued at all actors (`vehicles.input_bytes`).
+    pub input_bytes: InputBytes,
+    /// Pixels of all configured cameras (`vision.max_total_camera_pixels`).
+    pub camera_pixels: CameraPixels,
+}
+
+/// The global budget of configured camera pixels.
+#[derive(Debug, Default)]
+pub struct CameraPixels {
+    used: std::sync::atomic::AtomicU64,
+    /// Most pixels configured at once.
+    pub limit: u64,
+}
+
+impl CameraPixels {
+    /// A budget of `limit` pixels.
+    pub fn new(limit: u64) -> Self {
+        Self {
+            used: Default::default(),
+            limit,
+        }
+    }
+
+    /// Replaces a vehicle's `old` camera pixels by `new`; false (nothing changed) when that
+    /// would exceed the limit.
+    pub fn swap(&self, old: u64, new: u64) -> bool {
+        use std::sync::atomic::Ordering::AcqRel;
+        if new <= old {
+            self.used.fetch_sub(old - new, AcqRel);
+            return true;
+        }
+        let more = new - old;
+        let before = self.used.fetch_add(more, AcqRel);
+        if before + more > self.limit {
+            self.used.fetch_sub(more, AcqRel);
+            return false;
+        }
+        true
+    }
+
+    /// Pixels configured now.
+    pub fn used(&self) -> u64 {
+        self.used.load(std::sync::atomic::Ordering::Acquire)
+    }
+}
+
+/// A byte budget of queued sensor data: a semaphore with one permit per byte. A message holds
+/// its permits until the actor takes it off the queue.
+#[derive(Debug, Clone)]
+pub struct InputBytes {
+    permits: Arc<Semaphore>,
+    limit: usize,
+}
+
+impl InputBytes {
+    /// A budget of `limit` bytes.
+    pub fn new(limit: usize) -> Self {
+        let limit = limit.min(Semaphore::MAX_PERMITS);
+        Self {
+            permits: Arc::new(Semaphore::new(limit)),
+            limit,
+        }
+    }
+
+    /// Waits for `bytes` (at most the whole budget, so that one large message always fits an
+    /// empty queue).
+    async fn reserve(&self, bytes: usize) -> Option<OwnedSemaphorePermit> {
+        let n = u32::try_from(bytes.min(self.limit)).unwrap_or(u32::MAX);
+        Arc::clone(&self.permits).acquire_many_owned(n).await.ok()
+    }
+
+    /// Bytes reserved now.
+    pub fn used(&self) -> usize {
+        self.limit - self.permits.available_permits().min(self.limit)
+    }
+}
+
+/// The bytes a queued data message holds of its vehicle's and of the global budget, given back
+/// when the actor takes it.
+#[derive(Debug, Default)]
+pub struct Reserved {
+    _vehicle: Option<OwnedSemaphorePermit>,
+    _global: Option<OwnedSemaphorePermit>,
+}
+
+/// Decoded bytes a queued batch of `n` inputs holds (the queue's slot and the samples).
+pub fn batch_bytes(batch: &[Stamped]) -> usize {
+    std::mem::size_of::<Msg>() + std::mem::size_of_val(batch)
 }
 
 /// The global byte budget of the camera queues.
@@ -151,8 +239,9 @@ pub struct Stamped {
 /// A message on the ordered queue.
 #[derive(Debug)]
 pub enum Msg {
-    /// IMU samples, a GNSS fix or a camera frame.
-    Data(Vec<Stamped>),
+    /// IMU samples, a GNSS fix or a camera frame, and the queue bytes they hold (none for a
+    /// camera frame: its compressed bytes have their own budget).
+    Data(Vec<Stamped>, Reserved),
     /// Replace the configuration (and the engine).
     Configure {
         /// The new configuration.
@@ -194,9 +283,33 @@ pub struct VehicleHandle {
     /// The shared face of the vehicle.
     pub shared: Arc<VehicleShared>,
     tx: mpsc::Sender<Msg>,
+    /// Decoded sensor bytes queued at this vehicle (`vehicles.input_queue_bytes`).
+    budget: InputBytes,
 }
 
 impl VehicleHandle {
+    /// Waits until the vehicle's queue and all vehicles' queues together have room for `batch`
+    /// in bytes (back-pressure, never shedding), and wraps it as a message holding them.
+    pub async fn reserve(&self, batch: Vec<Stamped>, ctx: &Ctx) -> Msg {
+        let bytes = batch_bytes(&batch);
+        // Always the vehicle first, then the global budget: no two senders wait on each other
+        // in opposite orders.
+        let vehicle = self.budget.reserve(bytes).await;
+        let global = ctx.input_bytes.reserve(bytes).await;
+        Msg::Data(
+            batch,
+            Reserved {
+                _vehicle: vehicle,
+                _global: global,
+            },
+        )
+    }
+
+    /// Bytes of sensor data queued at this vehicle now.
+    pub fn queued_bytes(&self) -> usize {
+        self.budget.used()
+    }
+
     /// Queues a message, waiting while the queue is full (back-pressure, never shedding).
     pub async fn send(&self, msg: Msg) -> Result<(), SendError> {
         self.tx.send(msg).await.map_err(|_| SendError::Closed)
@@ -235,7 +348,7 @@ impl VehicleHandle {
         }
         let r = self
             .tx
-            .send(Msg::Data(vec![s]))
+            .send(Msg::Data(vec![s], Reserved::default()))
             .await
             .map_err(|_| SendError::Closed);
         if r.is_err() {
@@ -264,6 +377,7 @@ pub fn spawn(
     on_exit: Box<dyn FnOnce(bool) + Send>,
 ) -> VehicleHandle {
     let (tx, rx) = mpsc::channel(ctx.vehicles.input_queue);
+    let ctx_budget = ctx.vehicles.input_queue_bytes;
     let engine = ctx.factory.create(&config);
     // The vehicle's span is the explicit parent of the actor's log events. Entering it on every
     // poll of the task (`Instrument`) cost ~2 % of the service's CPU at fleet scale.
@@ -273,7 +387,6 @@ pub fn spawn(
         window: HealthWindow::new(mono_now()),
         shared: Arc::clone(&shared),
         engine,
-        pending: None,
         outbox: Vec::new(),
         stamped: 0,
         ingest_times: VecDeque::new(),
@@ -288,16 +401,19 @@ pub fn spawn(
         let evicted = actor.run(rx).await;
         on_exit(evicted);
     });
-    VehicleHandle { shared, tx }
+    VehicleHandle {
+        shared,
+        tx,
+        budget: InputBytes::new(ctx_budget),
+    }
 }
 
 struct Actor {
     shared: Arc<VehicleShared>,
     ctx: Arc<Ctx>,
-    engine: Box<dyn Engine>,
+    /// The engine and its outstanding vision job.
+    engine: BoxedEngine,
     buffer: ReorderBuffer<Stamped>,
-    /// The outstanding vision job's result.
-    pending: Option<oneshot::Receiver<VisionResult>>,
     /// Poses made since the last publication (published as one batch per wake-up: the message
     /// that woke the actor and those already queued behind it).
     outbox: Vec<Pose>,
@@ -378,15 +494,6 @@ impl Ticks {
 /// still sees each idle vehicle alive (10 s at the default period).
 pub const IDLE_HEALTH_EVERY: u32 = 10;
 
-async fn recv_vision(
-    pending: &mut Option<oneshot::Receiver<VisionResult>>,
-) -> Option<VisionResult> {
-    match pending {
-        Some(rx) => rx.await.ok(),
-        None => std::future::pending().await,
-    }
-}
-
 impl Actor {
     /// The event loop; returns whether the actor was evicted for idleness.
     async fn run(mut self, mut rx: mpsc::Receiver<Msg>) -> bool {
@@ -409,7 +516,8 @@ impl Actor {
         let evicted = loop {
             tokio::select! {
                 biased;
-                done = recv_vision(&mut self.pending), if self.pending.is_some() => self.on_vision(done),
+                done = std::future::poll_fn(|cx| self.engine.poll_vision(cx)),
+                    if self.engine.vision_pending() => self.on_vision(done),
                 // While vision lags, take no input: the queue fills and senders wait (back-
                 // pressure) instead of the engine abandoning jobs, so output never depends on timing.
                 msg = rx.recv(), if !self.backlogged() => match msg {
@@ -439,7 +547,7 @@ impl Actor {
                         self.publish_health();
                     }
                     let evict_at = self.last_input + idle;
-                    if mono_now() >= evict_at && self.pending.is_none() {
+                    if mono_now() >= evict_at && !self.engine.vision_pending() {
                         break true;
                     }
                     ticks.idle = !self.busy();
@@ -475,8 +583,8 @@ impl Actor {
             }
         }
         loop {
-            if self.pending.is_some() {
-                let done = recv_vision(&mut self.pending).await;
+            if self.engine.vision_pending() {
+                let done = std::future::poll_fn(|cx| self.engine.poll_vision(cx)).await;
                 self.on_vision(done);
                 continue;
             }
@@ -509,19 +617,20 @@ impl Actor {
     /// Whether the engine holds so many inputs behind the outstanding vision job that the actor
     /// should wait for the job before taking more.
     fn backlogged(&self) -> bool {
-        self.pending.is_some() && self.engine.backlog() >= uavnav_runner::DEFAULT_MAX_HELD_EVENTS
+        self.engine.vision_pending()
+            && self.engine.backlog() >= uavnav_runner::DEFAULT_MAX_HELD_EVENTS
     }
 
     /// Whether the next tick must report: input came in the last period or the one before
     /// (whose report shows the rates falling to zero), or inputs or a vision job are held.
     fn busy(&self) -> bool {
-        self.busy_reports > 0 || !self.buffer.is_empty() || self.pending.is_some()
+        self.busy_reports > 0 || !self.buffer.is_empty() || self.engine.vision_pending()
     }
 
     fn on_msg(&mut self, msg: Msg) {
         self.busy_reports = 2;
         match msg {
-            Msg::Data(batch) => {
+            Msg::Data(batch, _reserved) => {
                 self.last_input = mono_now();
                 for s in batch {
                     self.on_input(s);
@@ -529,8 +638,8 @@ impl Actor {
             }
             Msg::Configure { config, reply } => {
                 self.flush_all();
+                // The old engine's outstanding job, if any, goes with it.
                 self.engine = self.ctx.factory.create(&config);
-                self.pending = None;
                 if let Some(r) = reply {
                     let _ = r.send(());
                 }
@@ -538,7 +647,6 @@ impl Actor {
             Msg::Reset { reply } => {
                 self.buffer.clear();
                 self.engine.reset();
-                self.pending = None;
                 // The poses made before the reset keep the arrivals they came from.
                 self.stamp();
                 self.ingest_times.clear();
@@ -618,7 +726,7 @@ impl Actor {
 
     /// Queues a step's poses for publication, counts a frame the vision job refused and sends
     /// the step's vision job to the pool.
-    fn apply(&mut self, step: EngineStep) {
+    fn apply(&mut self, step: ActorStep) {
         self.outbox.extend(step.poses);
         if let Some(failure) = step.frame_failure {
             // The frame was acknowledged (its header was good): count it now, as rejected input.
@@ -630,29 +738,17 @@ impl Actor {
             self.ctx.metrics.frame_rejected(cause);
             debug!(parent: &self.span, t_ns = failure.t_ns, reason = %failure.reason, "camera frame refused by the vision job");
         }
-        self.start(step.work);
+        self.start(step.job);
     }
 
     /// Sends a vision job to the pool.
-    fn start(&mut self, work: Option<VisionWork>) {
-        let Some(work) = work else { return };
-        if self.pending.is_some() {
-            // The engine contract is one job at a time; never block on a broken engine.
-            warn!(
-                parent: &self.span,
-                "engine started a second vision job while one was out; dropping it"
-            );
-            return;
-        }
-        let (tx, rx) = oneshot::channel();
-        if self.ctx.pool.submit(Box::new(move || {
-            let _ = tx.send(work());
-        })) {
+    fn start(&mut self, job: Option<PoolJob>) {
+        let Some(job) = job else { return };
+        if self.ctx.pool.submit(job) {
             self.ctx
                 .metrics
                 .vision_in_flight
                 .set(self.ctx.pool.stats().in_flight as i64);
-            self.pending = Some(rx);
         } else {
             // The pool is shutting down: the job is lost, so release what the engine held for it.
             VehicleStats::add(&self.shared.stats.shed, 1);
@@ -662,15 +758,13 @@ impl Actor {
         }
     }
 
-    fn on_vision(&mut self, done: Option<VisionResult>) {
-        self.pending = None;
+    fn on_vision(&mut self, done: VisionOutcome) {
         match done {
-            Some(result) => {
+            VisionOutcome::Done(step) => {
                 self.ctx.metrics.vision_done.inc();
-                let step = self.engine.finish_frame(result);
                 self.apply(step);
             }
-            None => {
+            VisionOutcome::Lost => {
                 // The job panicked: the engine still waits for it, so start it afresh.
                 self.ctx.metrics.vision_failed.inc();
                 warn!(parent: &self.span, "vision job failed; resetting the vehicle's estimator");
@@ -751,7 +845,43 @@ impl Actor {
 
 #[cfg(test)]
 mod tests {
-    use super::counted_since;
+    use super::{CameraPixels, InputBytes, counted_since};
+
+    #[tokio::test]
+    async fn queued_bytes_wait_for_room_and_come_back_when_taken() {
+        let budget = InputBytes::new(1000);
+        let a = budget.reserve(600).await;
+        assert_eq!(budget.used(), 600);
+        // 600 more do not fit: the sender waits until the first message is taken.
+        let mut second = Box::pin(budget.reserve(600));
+        assert!(
+            futures::poll!(second.as_mut()).is_pending(),
+            "reserved beyond the budget"
+        );
+        drop(a);
+        let b = second.await;
+        assert_eq!(budget.used(), 600);
+        drop(b);
+        // A message larger than the whole budget still passes an empty queue.
+        let big = budget.reserve(5000).await;
+        assert_eq!(budget.used(), 1000);
+        drop(big);
+        assert_eq!(budget.used(), 0);
+    }
+
+    #[test]
+    fn camera_pixels_are_budgeted_across_vehicles() {
+        let px = CameraPixels::new(1000);
+        assert!(px.swap(0, 600));
+        assert!(!px.swap(0, 600), "over the budget");
+        assert_eq!(px.used(), 600);
+        assert!(
+            px.swap(600, 1000),
+            "a vehicle's own pixels are replaced, not added"
+        );
+        assert!(px.swap(1000, 0));
+        assert_eq!(px.used(), 0);
+    }
 
     #[test]
     fn engine_counters_are_counted_across_engine_restarts() {

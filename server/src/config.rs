@@ -280,6 +280,11 @@ pub struct VehiclesConfig {
     pub clock_resync_s: f64,
     /// Capacity of each actor's sensor queue (IMU/GNSS batches); full = back-pressure, never shed.
     pub input_queue: usize,
+    /// Decoded bytes of sensor data (IMU, GNSS, magnetometer, barometer) one vehicle may have
+    /// queued; beyond, its senders wait (back-pressure, never shed).
+    pub input_queue_bytes: usize,
+    /// Decoded bytes of sensor data queued at all vehicles together; beyond, senders wait.
+    pub input_bytes: usize,
     /// Camera frames one vehicle may have queued; beyond, new frames are shed (counted).
     pub camera_queue: usize,
     /// Compressed camera bytes one vehicle may have queued; beyond, new frames are shed.
@@ -297,6 +302,8 @@ impl Default for VehiclesConfig {
             clock_resync_samples: 10,
             clock_resync_s: 0.5,
             input_queue: 256,
+            input_queue_bytes: 4 << 20,
+            input_bytes: 256 << 20,
             camera_queue: 32,
             camera_queue_bytes: 16 << 20,
             max_vehicles: 10_000,
@@ -323,6 +330,10 @@ pub struct VisionConfig {
     /// Largest camera resolution a vehicle may configure, pixels (width × height): the vision
     /// front end's memory per camera vehicle and the decode memory per job grow with it.
     pub max_camera_pixels: u64,
+    /// Pixels of all configured cameras together (the sum of width × height over camera
+    /// vehicles): the global bound of the vision front ends' memory. A configuration that would
+    /// exceed it is refused (RESOURCE_EXHAUSTED).
+    pub max_total_camera_pixels: u64,
 }
 
 impl Default for VisionConfig {
@@ -335,6 +346,7 @@ impl Default for VisionConfig {
             max_camera_width_px: 4096,
             max_camera_height_px: 4096,
             max_camera_pixels: 4 << 20,
+            max_total_camera_pixels: 64 << 20,
         }
     }
 }
@@ -611,6 +623,15 @@ impl Config {
                 "grpc.ack_buffer, vehicles.input_queue and vehicles.camera_queue must be > 0",
             );
         }
+        let v = &self.vehicles;
+        if v.input_queue_bytes < 64 << 10
+            || v.input_queue_bytes > u32::MAX as usize
+            || v.input_bytes < v.input_queue_bytes
+        {
+            return bad(
+                "vehicles.input_queue_bytes must be within 64 KiB..4 GiB and vehicles.input_bytes at least as large",
+            );
+        }
         let g = &self.grpc;
         let seconds = |x: f64| x.is_finite() && x > 0.0 && x <= 86_400.0;
         if g.max_connections == 0 || self.http.max_connections == 0 {
@@ -665,11 +686,12 @@ impl Config {
         if vis.max_camera_width_px == 0
             || vis.max_camera_height_px == 0
             || vis.max_camera_pixels == 0
+            || vis.max_total_camera_pixels < vis.max_camera_pixels
             || vis.max_camera_width_px > 16_384
             || vis.max_camera_height_px > 16_384
         {
             return bad(
-                "vision.max_camera_width_px and vision.max_camera_height_px must be in [1, 16384], vision.max_camera_pixels > 0",
+                "vision.max_camera_width_px and vision.max_camera_height_px must be in [1, 16384], vision.max_camera_pixels > 0 and at most vision.max_total_camera_pixels",
             );
         }
         if !(self.zenoh.stalled_link_ms >= 0.0 && self.zenoh.stalled_link_ms <= 10_000.0) {

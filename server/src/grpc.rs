@@ -166,12 +166,10 @@ async fn ack_envelope(service: &Service, access: &Access, e: pb::SensorEnvelope)
             let metrics = service.metrics();
             metrics.input(Transport::Grpc, Kind::Malformed, Outcome::Invalid, 1);
             metrics.refuse(Transport::Grpc, Kind::Malformed, Cause::Missing);
-            crate::ingest::Verdict {
-                status: pb::IngestStatus::InvalidArgument,
-                reason: crate::ingest::Reason::Own(
-                    "payload: required (imu, gnss, mag, baro, camera or config)".into(),
-                ),
-            }
+            crate::ingest::Verdict::refused(
+                pb::IngestStatus::InvalidArgument,
+                "payload: required (imu, gnss, mag, baro, camera or config)".into(),
+            )
         }
     };
     pb::IngestAck {
@@ -179,6 +177,7 @@ async fn ack_envelope(service: &Service, access: &Access, e: pb::SensorEnvelope)
         vehicle_id: e.vehicle_id,
         status: verdict.status as i32,
         reason: verdict.reason.into(),
+        needs_config: verdict.needs_config,
     }
 }
 

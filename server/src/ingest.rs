@@ -10,7 +10,7 @@ use uavnav_proto::v1 as pb;
 use crate::actor::{Input, Msg, SendError, Stamped, VehicleHandle};
 use crate::metrics::{Kind, Outcome, Transport};
 use crate::registry::{Registry, RegistryError};
-use crate::validate::{self, ImageLimits, Rejection};
+use crate::validate::{self, CameraSpec, ImageLimits, Rejection};
 use crate::vehicle::{
     Admitted, GateLimits, GateRefusal, InputKind, VehicleStats, mono_now, wall_ns,
 };
@@ -38,6 +38,9 @@ pub struct Verdict {
     pub status: pb::IngestStatus,
     /// Reason (empty when accepted without remark).
     pub reason: Reason,
+    /// The vehicle runs without a client's configuration (sensor data only): the client should
+    /// send its configuration again (`IngestAck.needs_config`).
+    pub needs_config: bool,
 }
 
 /// The reason of a verdict: made for this message, or shared by every message refused alike (a
@@ -88,16 +91,43 @@ impl Verdict {
         Self {
             status: pb::IngestStatus::Accepted,
             reason: Reason::Own(reason),
+            needs_config: false,
+        }
+    }
+
+    /// Accepted sensor data for vehicle `h`, saying whether it lacks a configuration.
+    fn accepted_data(h: &VehicleHandle, reason: String) -> Self {
+        Self {
+            needs_config: !h
+                .shared
+                .configured
+                .load(std::sync::atomic::Ordering::Relaxed),
+            ..Self::accepted(reason)
+        }
+    }
+
+    /// A refusal with a reason shared by many messages.
+    pub fn refused_shared(status: pb::IngestStatus, reason: Arc<str>) -> Self {
+        Self {
+            status,
+            reason: Reason::Shared(reason),
+            needs_config: false,
+        }
+    }
+
+    /// A refusal with its own reason.
+    pub fn refused(status: pb::IngestStatus, reason: String) -> Self {
+        Self {
+            status,
+            reason: Reason::Own(reason),
+            needs_config: false,
         }
     }
 }
 
 impl From<Rejection> for Verdict {
     fn from(r: Rejection) -> Self {
-        Self {
-            status: r.status,
-            reason: Reason::Own(r.reason),
-        }
+        Self::refused(r.status, r.reason)
     }
 }
 
@@ -270,7 +300,7 @@ impl Ingestor {
             .input(transport, Kind::Imu, Outcome::Future, future);
         // The accepted samples as received, made before the batch moves to the actor.
         let recorded = self.record.as_ref().map(|r| (r, accepted_wire(b, &batch)));
-        self.send(&h, id, Msg::Data(batch)).await?;
+        self.send_data(&h, id, batch).await?;
         if let Some((record, wire)) = recorded {
             record.imu(id, wire);
         }
@@ -288,7 +318,7 @@ impl Ingestor {
             ),
             None => String::new(),
         };
-        Ok(Verdict::accepted(remark))
+        Ok(Verdict::accepted_data(&h, remark))
     }
 
     /// Gates and routes one validated single-sample input (GNSS fix, magnetometer or barometer
@@ -311,14 +341,14 @@ impl Ingestor {
                 kind.field().into()
             })
             .map_err(|r| gate_rejection(Some(r)))?;
-        self.send(
+        self.send_data(
             &h,
             id,
-            Msg::Data(vec![Stamped {
+            vec![Stamped {
                 input,
                 wall_ns: wall,
                 at: mono_now(),
-            }]),
+            }],
         )
         .await?;
         VehicleStats::add(h.shared.stats.of(kind), 1);
@@ -333,7 +363,7 @@ impl Ingestor {
         h.shared
             .last_input_wall_ns
             .store(wall, std::sync::atomic::Ordering::Relaxed);
-        Ok(Verdict::accepted(String::new()))
+        Ok(Verdict::accepted_data(&h, String::new()))
     }
 
     async fn camera(
@@ -399,7 +429,7 @@ impl Ingestor {
         h.shared
             .last_input_wall_ns
             .store(wall, std::sync::atomic::Ordering::Relaxed);
-        Ok(Verdict::accepted(String::new()))
+        Ok(Verdict::accepted_data(&h, String::new()))
     }
 
     /// The vehicle's clock jumped (the gate saw a consistent run of samples far from its stream
@@ -418,6 +448,17 @@ impl Ingestor {
     }
 
     /// Sends on the ordered queue, starting a fresh actor once if this one was evicted meanwhile.
+    /// Queues sensor data at vehicle `h` once its byte budgets have room (waiting meanwhile).
+    async fn send_data(
+        &self,
+        h: &VehicleHandle,
+        id: &str,
+        batch: Vec<Stamped>,
+    ) -> Result<(), Rejection> {
+        let msg = h.reserve(batch, self.registry.ctx()).await;
+        self.send(h, id, msg).await
+    }
+
     async fn send(&self, h: &VehicleHandle, id: &str, msg: Msg) -> Result<(), Rejection> {
         let Err(msg) = h.send_or_return(msg).await else {
             return Ok(());
@@ -439,10 +480,29 @@ impl Ingestor {
     ) -> Result<bool, Rejection> {
         validate::vehicle_id(id)?;
         let (config, spec) = validate::vehicle_config(c, self.limits)?;
-        let (h, created) = self
+        // The global pixel budget: this vehicle's camera replaces what it had.
+        let pixels =
+            |c: Option<CameraSpec>| c.map_or(0, |c| u64::from(c.width) * u64::from(c.height));
+        let old_px = self
             .registry
-            .get_or_create(id, Some(&config))
-            .map_err(registry_rejection)?;
+            .get(id)
+            .map_or(0, |h| pixels(h.shared.camera()));
+        let new_px = pixels(spec);
+        let budget = &self.registry.ctx().camera_pixels;
+        if !budget.swap(old_px, new_px) {
+            return Err(Rejection::exhausted(format!(
+                "camera: {new_px} pixels would exceed the service's {} for all cameras (vision.max_total_camera_pixels; {} configured)",
+                budget.limit,
+                budget.used()
+            )));
+        }
+        let (h, created) = match self.registry.get_or_create(id, Some(&config)) {
+            Ok(created) => created,
+            Err(e) => {
+                budget.swap(new_px, old_px);
+                return Err(registry_rejection(e));
+            }
+        };
         let same = {
             let mut current = h.shared.config.lock().unwrap_or_else(|p| p.into_inner());
             let same = !created && current.as_deref() == Some(&config);

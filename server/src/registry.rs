@@ -134,6 +134,12 @@ impl Registry {
                 map.remove(&shared.id);
             }
             reg.ctx.metrics.vehicles.set(map.len() as i64);
+            // Its camera's pixels go back to the global budget.
+            if let Some(c) = shared.camera() {
+                reg.ctx
+                    .camera_pixels
+                    .swap(u64::from(c.width) * u64::from(c.height), 0);
+            }
             if evicted {
                 reg.ctx.metrics.evictions.inc();
             }

@@ -10,8 +10,8 @@ use uavnav_runner::{
 };
 
 use crate::engine::{
-    Engine, EngineError, EngineFactory, EngineHealth, EngineStep, FrameFailure, FrameFailureKind,
-    VisionResult, VisionWork,
+    BoxedEngine, Engine, EngineError, EngineFactory, EngineHealth, EngineStep, FrameFailure,
+    FrameFailureKind, VisionWork,
 };
 use crate::hub::Pose;
 
@@ -41,8 +41,8 @@ impl Default for RunnerFactory {
 }
 
 impl EngineFactory for RunnerFactory {
-    fn create(&self, config: &VehicleConfig) -> Box<dyn Engine> {
-        Box::new(RunnerEngine {
+    fn create(&self, config: &VehicleConfig) -> BoxedEngine {
+        crate::engine::boxed(RunnerEngine {
             runner: VehicleRunner::new(config.clone(), self.params.clone(), None),
             last_t_ns: 0,
             scratch: Step::default(),
@@ -61,7 +61,7 @@ pub struct RunnerEngine {
 
 impl RunnerEngine {
     /// Appends `step`'s poses to `out` and hands back its vision work.
-    fn emit(&mut self, step: &mut Step, out: &mut Vec<Pose>) -> Option<VisionWork> {
+    fn emit(&mut self, step: &mut Step, out: &mut Vec<Pose>) -> Option<VisionWork<VisionDone>> {
         if let Some(p) = step.poses.last() {
             self.last_t_ns = p.t_ns;
         }
@@ -69,7 +69,7 @@ impl RunnerEngine {
         step.job.take().map(vision_work)
     }
 
-    fn step(&mut self, mut step: Step) -> EngineStep {
+    fn step(&mut self, mut step: Step) -> EngineStep<VisionDone> {
         let mut poses = Vec::with_capacity(step.poses.len());
         let work = self.emit(&mut step, &mut poses);
         EngineStep {
@@ -81,7 +81,9 @@ impl RunnerEngine {
 }
 
 impl Engine for RunnerEngine {
-    fn push(&mut self, event: SensorEvent) -> Result<EngineStep, EngineError> {
+    type Vision = VisionDone;
+
+    fn push(&mut self, event: SensorEvent) -> Result<EngineStep<VisionDone>, EngineError> {
         let mut poses = Vec::new();
         let work = self.push_into(event, &mut poses)?;
         Ok(EngineStep {
@@ -95,7 +97,7 @@ impl Engine for RunnerEngine {
         &mut self,
         event: SensorEvent,
         poses: &mut Vec<Pose>,
-    ) -> Result<Option<VisionWork>, EngineError> {
+    ) -> Result<Option<VisionWork<VisionDone>>, EngineError> {
         let mut scratch = std::mem::take(&mut self.scratch);
         scratch.poses.clear();
         let r = self.runner.push_into(event, &mut scratch);
@@ -105,18 +107,12 @@ impl Engine for RunnerEngine {
         Ok(work)
     }
 
-    fn finish_frame(&mut self, done: VisionResult) -> EngineStep {
-        match done.downcast::<VisionDone>() {
-            Ok(done) => {
-                let failure = frame_failure(&done);
-                let step = self.runner.finish_frame(*done);
-                let mut step = self.step(step);
-                step.frame_failure = failure;
-                step
-            }
-            // Only this engine's jobs come back here; anything else is a wiring bug, not input.
-            Err(_) => EngineStep::default(),
-        }
+    fn finish_frame(&mut self, done: VisionDone) -> EngineStep<VisionDone> {
+        let failure = frame_failure(&done);
+        let step = self.runner.finish_frame(done);
+        let mut step = self.step(step);
+        step.frame_failure = failure;
+        step
     }
 
     fn health(&self) -> EngineHealth {
@@ -155,7 +151,7 @@ impl Engine for RunnerEngine {
         self.runner.held_events()
     }
 
-    fn abandon_job(&mut self) -> EngineStep {
+    fn abandon_job(&mut self) -> EngineStep<VisionDone> {
         let step = self.runner.abandon_job();
         self.step(step)
     }
@@ -182,8 +178,8 @@ fn frame_failure(done: &VisionDone) -> Option<FrameFailure> {
 }
 
 /// A runner job as pool work.
-fn vision_work(job: uavnav_runner::VisionJob) -> VisionWork {
-    Box::new(move || Box::new(job.run()) as VisionResult)
+fn vision_work(job: uavnav_runner::VisionJob) -> VisionWork<VisionDone> {
+    Box::new(move || job.run())
 }
 
 fn innovation(h: &Health) -> pb::InnovationRatios {

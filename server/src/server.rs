@@ -218,6 +218,8 @@ pub fn ingest_path(
             queued: Default::default(),
             limit: config.vision.queue_bytes,
         },
+        input_bytes: crate::actor::InputBytes::new(config.vehicles.input_bytes),
+        camera_pixels: crate::actor::CameraPixels::new(config.vision.max_total_camera_pixels),
     });
     let limits = ImageLimits {
         max_bytes: config.vision.max_image_bytes,

@@ -11,7 +11,7 @@ use std::sync::Arc;
 use uavnav_proto::v1 as pb;
 
 use crate::actor::VehicleHandle;
-use crate::ingest::{Ingestor, Payload, Reason, Verdict};
+use crate::ingest::{Ingestor, Payload, Verdict};
 use crate::metrics::{Cause, Metrics, Transport};
 use crate::security::{Access, AuthError, AuthTransport, Authorizer, Refusals, Verb};
 use crate::validate::{self, Rejection};
@@ -117,10 +117,7 @@ impl Service {
         };
         if !access.allows(verb, id) {
             let reason = self.refusals.denied(access, transport.into(), verb);
-            return Verdict {
-                status: pb::IngestStatus::PermissionDenied,
-                reason: Reason::Shared(reason),
-            };
+            return Verdict::refused_shared(pb::IngestStatus::PermissionDenied, reason);
         }
         self.ingestor.submit(transport, id, payload).await
     }

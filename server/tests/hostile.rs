@@ -316,6 +316,51 @@ async fn cameras_and_images_above_the_limits_are_refused_by_their_header() {
     server.shutdown().await.unwrap();
 }
 
+/// Row 5: the cameras of all vehicles together fit `vision.max_total_camera_pixels` (the global
+/// bound of the vision front ends' memory): one camera too many is refused, and a vehicle that
+/// drops its camera, or is evicted, gives its pixels back.
+#[tokio::test]
+async fn the_cameras_of_all_vehicles_share_one_pixel_budget() {
+    let mut config = test_config();
+    config.vision.max_total_camera_pixels = 2 * 640 * 480;
+    config.vision.max_camera_pixels = 640 * 480;
+    config.vehicles.idle_evict_s = 0.3;
+    let server = start(config).await;
+    let mut c = client(&server).await;
+    let configure = |id: &str, camera: bool| pb::ConfigureVehicleRequest {
+        vehicle_id: id.into(),
+        config: Some(vehicle_config(camera)),
+    };
+    c.configure_vehicle(configure("a", true)).await.unwrap();
+    c.configure_vehicle(configure("b", true)).await.unwrap();
+    // The same configuration again costs nothing more.
+    c.configure_vehicle(configure("b", true)).await.unwrap();
+    let st = c.configure_vehicle(configure("c", true)).await.unwrap_err();
+    assert_eq!(st.code(), tonic::Code::ResourceExhausted, "{st:?}");
+    assert!(
+        st.message().contains("vision.max_total_camera_pixels"),
+        "{st:?}"
+    );
+    assert!(
+        server.registry().get("c").is_none(),
+        "the refused vehicle was created"
+    );
+    // Without a camera, c fits; a drops its camera and c gets one.
+    c.configure_vehicle(configure("c", false)).await.unwrap();
+    c.configure_vehicle(configure("a", false)).await.unwrap();
+    c.configure_vehicle(configure("c", true)).await.unwrap();
+    // An evicted vehicle gives its pixels back.
+    assert!(
+        eventually(std::time::Duration::from_secs(10), || server
+            .registry()
+            .get("b")
+            .is_none())
+        .await
+    );
+    c.configure_vehicle(configure("d", true)).await.unwrap();
+    server.shutdown().await.unwrap();
+}
+
 /// Row 5 / 8: a JPEG whose header is good but whose body does not decode. Before: acknowledged
 /// ACCEPTED and counted nowhere. After: still ACCEPTED (the decode runs after the ack), then
 /// counted in the vehicle's health (`rejected`) and in `/metrics` with the reason. Runs the

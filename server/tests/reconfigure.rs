@@ -12,16 +12,16 @@ use common::*;
 use uavnav_core::VehicleConfig;
 use uavnav_proto::v1 as pb;
 use uavnavd::Server;
-use uavnavd::engine::{Engine, EngineFactory};
+use uavnavd::engine::{BoxedEngine, EngineFactory, boxed};
 
 /// Echo engines, counting how many were made.
 #[derive(Debug, Default)]
 struct Counting(AtomicUsize);
 
 impl EngineFactory for Counting {
-    fn create(&self, _config: &VehicleConfig) -> Box<dyn Engine> {
+    fn create(&self, _config: &VehicleConfig) -> BoxedEngine {
         self.0.fetch_add(1, Ordering::Relaxed);
-        Box::new(EchoEngine::default())
+        boxed(EchoEngine::default())
     }
 }
 
@@ -56,5 +56,41 @@ async fn the_same_configuration_again_keeps_the_engine() {
     });
     c.configure_vehicle(configure(other)).await.unwrap();
     assert_eq!(factory.0.load(Ordering::Relaxed), 2);
+    server.shutdown().await.unwrap();
+}
+
+/// Acks of sensor data say whether the vehicle runs without a client's configuration
+/// (`needs_config`), so that a client whose vehicle the service forgot can configure it again.
+#[tokio::test]
+async fn acks_say_when_a_vehicle_has_no_configuration() {
+    let server = start(test_config()).await;
+    let mut c = client(&server).await;
+    let acks = ingest(&mut c, vec![imu_env("bare", 1, vec![imu(1_000_000_000)])])
+        .await
+        .unwrap();
+    assert_eq!(acks[0].status, pb::IngestStatus::Accepted as i32);
+    assert!(acks[0].needs_config, "{:?}", acks[0]);
+    let config = pb::SensorEnvelope {
+        vehicle_id: "bare".into(),
+        sequence: 2,
+        payload: Some(pb::sensor_envelope::Payload::Config(vehicle_config(false))),
+    };
+    let acks = ingest(
+        &mut c,
+        vec![config, imu_env("bare", 3, vec![imu(1_100_000_000)])],
+    )
+    .await
+    .unwrap();
+    assert!(
+        acks.iter()
+            .all(|a| a.status == pb::IngestStatus::Accepted as i32)
+    );
+    assert!(acks.iter().all(|a| !a.needs_config), "{acks:?}");
+    // A refusal says nothing about the configuration.
+    let acks = ingest(&mut c, vec![imu_env("bare", 4, vec![imu(500_000_000)])])
+        .await
+        .unwrap();
+    assert_ne!(acks[0].status, pb::IngestStatus::Accepted as i32);
+    assert!(!acks[0].needs_config);
     server.shutdown().await.unwrap();
 }

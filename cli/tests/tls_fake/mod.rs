@@ -80,6 +80,7 @@ impl UavNav for Fake {
                 vehicle_id: env.vehicle_id,
                 status: status as i32,
                 reason,
+                needs_config: false,
             })
         });
         Ok(Response::new(Box::pin(acks)))

@@ -10,7 +10,9 @@ use std::time::Duration;
 use uavnav_core::{GnssFix, SensorEvent, VehicleConfig};
 use uavnav_proto::v1 as pb;
 use uavnav_proto::v1::uav_nav_client::UavNavClient;
-use uavnavd::engine::{Engine, EngineError, EngineFactory, EngineHealth, EngineStep, VisionResult};
+use uavnavd::engine::{
+    BoxedEngine, Engine, EngineError, EngineFactory, EngineHealth, EngineStep, boxed,
+};
 use uavnavd::{Config, RunningServer, Server};
 
 /// What echo engines were given, shared with the test that made their factory.
@@ -35,7 +37,10 @@ pub struct EchoEngine {
 }
 
 impl Engine for EchoEngine {
-    fn push(&mut self, event: SensorEvent) -> Result<EngineStep, EngineError> {
+    /// The frame's time.
+    type Vision = i64;
+
+    fn push(&mut self, event: SensorEvent) -> Result<EngineStep<i64>, EngineError> {
         let mut step = EngineStep::default();
         match event {
             SensorEvent::Imu(s) => {
@@ -77,17 +82,15 @@ impl Engine for EchoEngine {
                 let t_ns = frame.t_ns;
                 step.work = Some(Box::new(move || {
                     std::thread::sleep(Duration::from_millis(2));
-                    Box::new(t_ns) as VisionResult
+                    t_ns
                 }));
             }
         }
         Ok(step)
     }
 
-    fn finish_frame(&mut self, done: VisionResult) -> EngineStep {
-        if done.downcast::<i64>().is_ok() {
-            self.frames += 1;
-        }
+    fn finish_frame(&mut self, _t_ns: i64) -> EngineStep<i64> {
+        self.frames += 1;
         EngineStep::default()
     }
 
@@ -126,8 +129,8 @@ impl EchoEngine {
 pub struct EchoFactory;
 
 impl EngineFactory for EchoFactory {
-    fn create(&self, _config: &VehicleConfig) -> Box<dyn Engine> {
-        Box::new(EchoEngine::default())
+    fn create(&self, _config: &VehicleConfig) -> BoxedEngine {
+        boxed(EchoEngine::default())
     }
 }
 
@@ -136,8 +139,8 @@ impl EngineFactory for EchoFactory {
 pub struct SeeingFactory(pub Arc<Seen>);
 
 impl EngineFactory for SeeingFactory {
-    fn create(&self, _config: &VehicleConfig) -> Box<dyn Engine> {
-        Box::new(EchoEngine {
+    fn create(&self, _config: &VehicleConfig) -> BoxedEngine {
+        boxed(EchoEngine {
             seen: Some(Arc::clone(&self.0)),
             ..EchoEngine::default()
         })
