@@ -20,6 +20,7 @@
 //! | [`conn`] | every TCP listener's accept loop: connection limits, idle timeout, TLS handshakes, the file-descriptor budget |
 //! | [`grpc`] | the tonic `uavnav.v1.UavNav` service |
 //! | [`zenoh_io`] | the embedded Zenoh session: inputs, outputs, queryables, liveliness |
+//! | [`zenoh_stats`] | what Zenoh dropped on congested links, read from its runtime into `/metrics` |
 //! | [`hub`] | broadcast fan-out of poses and health |
 //! | (crate `uavnav-liveview`) | the Foxglove live view (WebSocket): pose, path, GNSS fix and camera per vehicle |
 //! | [`health`] | per-vehicle health reports |
@@ -53,6 +54,7 @@ pub mod validate;
 pub mod vehicle;
 pub mod vision_pool;
 pub mod zenoh_io;
+pub mod zenoh_stats;
 
 use std::process::ExitCode;
 

@@ -258,6 +258,9 @@ pub struct Metrics {
     pub engine_errors: Counter,
     /// Outputs the Zenoh publisher could not keep up with (skipped).
     pub zenoh_output_lagged: Counter,
+    /// Messages Zenoh dropped on links congested beyond `zenoh.stalled_link_ms` (a subscriber
+    /// that stopped reading), all peers together.
+    pub zenoh_dropped: Counter,
     /// Output batches (poses) and reports (health) gRPC watch streams skipped because they were
     /// behind.
     pub watch_lagged: Counter,
@@ -304,6 +307,7 @@ impl Metrics {
         let reorder_dropped = Counter::default();
         let engine_errors = Counter::default();
         let zenoh_output_lagged = Counter::default();
+        let zenoh_dropped = Counter::default();
         let watch_lagged = Counter::default();
         let zenoh_samples = Counter::default();
         let foxglove_dropped = Counter::default();
@@ -413,6 +417,11 @@ impl Metrics {
             zenoh_output_lagged.clone(),
         );
         registry.register(
+            "zenoh_dropped",
+            "Messages Zenoh dropped on links congested beyond zenoh.stalled_link_ms (subscribers that stopped reading), all peers",
+            zenoh_dropped.clone(),
+        );
+        registry.register(
             "watch_lagged",
             "Pose batches and health reports gRPC watch streams skipped because they were behind",
             watch_lagged.clone(),
@@ -462,6 +471,7 @@ impl Metrics {
             reorder_dropped,
             engine_errors,
             zenoh_output_lagged,
+            zenoh_dropped,
             watch_lagged,
             zenoh_samples,
             foxglove_dropped,

@@ -21,6 +21,7 @@ use uavnav_proto::keys::{self, Leaf};
 use uavnav_proto::{names, v1 as pb};
 use zenoh::Session;
 use zenoh::bytes::Encoding;
+use zenoh::internal::runtime::{Runtime, RuntimeBuilder};
 use zenoh::key_expr::KeyExpr;
 use zenoh::liveliness::LivelinessToken;
 
@@ -92,6 +93,11 @@ fn serde_json_list(v: &[String]) -> String {
 #[derive(Debug)]
 pub struct ZenohIo {
     session: Session,
+    /// The session's runtime: closed after the session (a session made on a given runtime
+    /// does not close it).
+    runtime: Runtime,
+    /// Mirrors the runtime's congestion drops into `/metrics`.
+    stats: JoinHandle<()>,
     tasks: Vec<JoinHandle<()>>,
     output: Option<(JoinHandle<()>, oneshot::Sender<()>)>,
     /// The locators the session listens on.
@@ -107,9 +113,19 @@ impl ZenohIo {
         hub: Hub,
     ) -> anyhow::Result<Self> {
         let ingestor = service.ingestor().clone();
-        let session = zenoh::open(session_config(cfg, sec)?)
+        // The session runs on a runtime built here, so that its transport statistics (what
+        // Zenoh drops on congested links) can be read (`zenoh_stats`).
+        let mut runtime = RuntimeBuilder::new(session_config(cfg, sec)?)
+            .build()
             .await
             .map_err(|e| anyhow!("opening the zenoh session: {e}"))?;
+        let session = zenoh::session::init(runtime.clone().into())
+            .await
+            .map_err(|e| anyhow!("opening the zenoh session: {e}"))?;
+        runtime
+            .start()
+            .await
+            .map_err(|e| anyhow!("starting the zenoh session: {e}"))?;
         // Zenoh 1.x does not expose the bound locators on the session: report the configured ones.
         let locators = cfg.listen.clone();
         let instance = if cfg.instance.is_empty() {
@@ -123,6 +139,10 @@ impl ZenohIo {
             .await
             .map_err(|e| anyhow!("declaring the service liveliness token: {e}"))
             .context("zenoh.instance must be a valid key chunk")?;
+        let stats = crate::zenoh_stats::spawn_poll(
+            runtime.clone(),
+            service.metrics().zenoh_dropped.clone(),
+        );
         let mut tasks = Vec::new();
         tasks.push(spawn_inputs(&session, service).await?);
         tasks.push(spawn_queries(&session, ingestor.clone()).await?);
@@ -142,6 +162,8 @@ impl ZenohIo {
         let output = Some((tokio::spawn(out), done_tx));
         Ok(Self {
             session,
+            runtime,
+            stats,
             tasks,
             output,
             locators,
@@ -163,6 +185,10 @@ impl ZenohIo {
         }
         if let Err(e) = self.session.close().await {
             warn!(error = %e, "closing the zenoh session");
+        }
+        self.stats.abort();
+        if let Err(e) = self.runtime.close().await {
+            warn!(error = %e, "closing the zenoh runtime");
         }
     }
 }

@@ -155,5 +155,23 @@ async fn a_stalled_zenoh_subscriber_does_not_starve_the_others() {
         s < want,
         "the stalled subscriber got everything: the test stalled nothing"
     );
+    // What the stalled link lost is counted (read from Zenoh's statistics once a second).
+    let dropped = server.metrics().zenoh_dropped.clone();
+    assert!(
+        eventually(Duration::from_secs(5), || dropped.get() > 0).await,
+        "Zenoh's drops on the stalled link were not counted"
+    );
+    eprintln!(
+        "counted as dropped by Zenoh: {} (the stalled subscriber missed {})",
+        dropped.get(),
+        want - s
+    );
+    assert!(
+        server
+            .metrics()
+            .encode()
+            .contains("uavnav_zenoh_dropped_total "),
+        "not in /metrics"
+    );
     server.shutdown().await.unwrap();
 }
