@@ -173,6 +173,9 @@ pub struct GrpcConfig {
     /// A ping not answered within this closes the connection (a link that died without a
     /// reset), s.
     pub keepalive_timeout_s: f64,
+    /// Streams one connection may have open at once (HTTP/2 `max_concurrent_streams`): each
+    /// may hold one message of up to `max_message_bytes` while it arrives.
+    pub max_streams_per_connection: u32,
 }
 
 impl Default for GrpcConfig {
@@ -186,6 +189,7 @@ impl Default for GrpcConfig {
             idle_timeout_s: 120.0,
             keepalive_interval_s: 20.0,
             keepalive_timeout_s: 20.0,
+            max_streams_per_connection: 32,
         }
     }
 }
@@ -447,6 +451,9 @@ pub struct Cli {
     /// Serve gRPC server reflection (grpc.reflection) [default: off].
     #[arg(long)]
     pub grpc_reflection: bool,
+    /// Print the worst-case resident memory of the configuration, term by term, and exit.
+    #[arg(long)]
+    pub memory_budget: bool,
 }
 
 /// Environment variables read by [`Config::load`], with the key each overrides.
@@ -634,8 +641,13 @@ impl Config {
         }
         let g = &self.grpc;
         let seconds = |x: f64| x.is_finite() && x > 0.0 && x <= 86_400.0;
-        if g.max_connections == 0 || self.http.max_connections == 0 {
-            return bad("grpc.max_connections and http.max_connections must be > 0");
+        if g.max_connections == 0
+            || self.http.max_connections == 0
+            || g.max_streams_per_connection == 0
+        {
+            return bad(
+                "grpc.max_connections, grpc.max_streams_per_connection and http.max_connections must be > 0",
+            );
         }
         if !(seconds(g.idle_timeout_s)
             && seconds(self.http.idle_timeout_s)

@@ -20,6 +20,7 @@
 //! | [`conn`] | every TCP listener's accept loop: connection limits, idle timeout, TLS handshakes, the file-descriptor budget |
 //! | [`grpc`] | the tonic `uavnav.v1.UavNav` service |
 //! | [`zenoh_io`] | the embedded Zenoh session: inputs, outputs, queryables, liveliness |
+//! | [`budget`] | the worst-case resident memory of a configuration (`--memory-budget`) |
 //! | [`zenoh_stats`] | what Zenoh dropped on congested links, read from its runtime into `/metrics` |
 //! | [`hub`] | broadcast fan-out of poses and health |
 //! | (crate `uavnav-liveview`) | the Foxglove live view (WebSocket): pose, path, GNSS fix and camera per vehicle |
@@ -32,6 +33,7 @@
 //! | [`logging`] | `tracing` subscriber setup |
 
 pub mod actor;
+pub mod budget;
 pub mod config;
 pub mod conn;
 pub mod engine;
@@ -78,6 +80,10 @@ pub fn run() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    if std::env::args_os().any(|a| a == "--memory-budget") {
+        println!("{}", budget::MemoryBudget::of(&config));
+        return ExitCode::SUCCESS;
+    }
     logging::init(&config.log);
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .enable_all()

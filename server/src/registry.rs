@@ -134,6 +134,10 @@ impl Registry {
                 map.remove(&shared.id);
             }
             reg.ctx.metrics.vehicles.set(map.len() as i64);
+            // A map never gives back its capacity on its own: after a flood has gone, do.
+            if map.capacity() > 64 && map.len() * 4 < map.capacity() {
+                map.shrink_to_fit();
+            }
             // Its camera's pixels go back to the global budget.
             if let Some(c) = shared.camera() {
                 reg.ctx

@@ -280,6 +280,7 @@ async fn serve_grpc(
         )
     });
     let mut router = tonic::transport::Server::builder()
+        .max_concurrent_streams(Some(config.grpc.max_streams_per_connection))
         .http2_keepalive_interval(keepalive.map(|k| k.0))
         .http2_keepalive_timeout(keepalive.map(|k| k.1))
         .layer(axum::middleware::map_response(

@@ -150,6 +150,7 @@ impl ZenohIo {
             &session,
             hub.lifecycle.subscribe(),
             service_token,
+            Arc::clone(ingestor.registry()),
         ));
         let (done_tx, done_rx) = oneshot::channel();
         let out = publish_outputs(
@@ -412,32 +413,61 @@ fn spawn_liveliness(
     session: &Session,
     mut rx: broadcast::Receiver<(Arc<str>, bool)>,
     service: LivelinessToken,
+    registry: Arc<crate::registry::Registry>,
 ) -> JoinHandle<()> {
     let session = session.clone();
     tokio::spawn(async move {
         let _service = service;
         let mut tokens: HashMap<Arc<str>, LivelinessToken> = HashMap::new();
+        let declare = |id: Arc<str>| {
+            let session = session.clone();
+            async move {
+                match session
+                    .liveliness()
+                    .declare_token(keys::alive_key(&id))
+                    .await
+                {
+                    Ok(t) => Some((id, t)),
+                    Err(e) => {
+                        warn!(vehicle = ?id, error = %e, "declaring the vehicle liveliness token");
+                        None
+                    }
+                }
+            }
+        };
         loop {
             match rx.recv().await {
                 Ok((id, true)) => {
-                    match session
-                        .liveliness()
-                        .declare_token(keys::alive_key(&id))
-                        .await
-                    {
-                        Ok(t) => {
-                            tokens.insert(id, t);
-                        }
-                        Err(e) => {
-                            warn!(vehicle = ?id, error = %e, "declaring the vehicle liveliness token")
-                        }
+                    if let Some((id, t)) = declare(id).await {
+                        tokens.insert(id, t);
                     }
                 }
                 Ok((id, false)) => {
                     tokens.remove(&id);
                 }
-                Err(broadcast::error::RecvError::Lagged(_)) => continue,
+                Err(broadcast::error::RecvError::Lagged(_)) => {
+                    // Events were lost (a flood of new ids): without them, the tokens of
+                    // vehicles evicted meanwhile would stay declared for ever. Reconcile with
+                    // the live vehicles instead.
+                    let live: std::collections::HashSet<Arc<str>> = registry
+                        .list("")
+                        .into_iter()
+                        .map(|h| Arc::clone(&h.shared.id))
+                        .collect();
+                    tokens.retain(|id, _| live.contains(id));
+                    for id in live {
+                        if !tokens.contains_key(&id)
+                            && let Some((id, t)) = declare(id).await
+                        {
+                            tokens.insert(id, t);
+                        }
+                    }
+                }
                 Err(broadcast::error::RecvError::Closed) => break,
+            }
+            // A map never gives back its capacity on its own: after a flood has gone, do.
+            if tokens.capacity() > 64 && tokens.len() * 4 < tokens.capacity() {
+                tokens.shrink_to_fit();
             }
         }
     })

@@ -1,0 +1,305 @@
+//! Memory under the attacks of issue 19's table, against the worst-case formula
+//! (`uavnavd::budget`, `uavnavd --memory-budget`). Not a criterion benchmark: it prints figures
+//! and exits 1 when a target is missed (`cargo bench -p uavnavd --bench memory`).
+//!
+//! An in-process `uavnavd` with its defaults (Zenoh on, product engine; vehicles evicted after
+//! 2 s of silence so that the run ends in minutes) takes each attack in turn; the resident memory
+//! of the process is sampled every 5 ms. Targets: the peak never above the formula's total, and
+//! once the attacks are over and their vehicles evicted, the resident memory back within 20 % of
+//! the baseline taken before them.
+#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
+
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
+#[path = "../tests/common/mod.rs"]
+mod common;
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::Duration;
+
+use common::*;
+use uavnav_proto::v1 as pb;
+use uavnavd::budget::MemoryBudget;
+
+/// Resident memory of this process, bytes.
+fn rss_bytes() -> u64 {
+    let statm = std::fs::read_to_string("/proc/self/statm").unwrap_or_default();
+    let pages: u64 = statm
+        .split_whitespace()
+        .nth(1)
+        .and_then(|p| p.parse().ok())
+        .unwrap_or(0);
+    pages * 4096
+}
+
+fn mib(b: u64) -> f64 {
+    b as f64 / f64::from(1u32 << 20)
+}
+
+/// Samples the resident memory every 5 ms, keeping the peak since the last `take`.
+struct Sampler {
+    peak: Arc<AtomicU64>,
+    stop: Arc<AtomicBool>,
+}
+
+impl Sampler {
+    fn start() -> Self {
+        let (peak, stop) = (
+            Arc::new(AtomicU64::new(0)),
+            Arc::new(AtomicBool::new(false)),
+        );
+        let (p, s) = (Arc::clone(&peak), Arc::clone(&stop));
+        std::thread::spawn(move || {
+            while !s.load(Ordering::Relaxed) {
+                p.fetch_max(rss_bytes(), Ordering::Relaxed);
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        });
+        Self { peak, stop }
+    }
+
+    fn take(&self) -> u64 {
+        self.peak.swap(rss_bytes(), Ordering::Relaxed)
+    }
+}
+
+impl Drop for Sampler {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+/// Waits until every vehicle is evicted, then a little more for the allocator to settle.
+async fn quiet(server: &uavnavd::RunningServer) {
+    let empty = eventually(Duration::from_secs(60), || {
+        server.registry().ctx().metrics.vehicles.get() == 0
+    })
+    .await;
+    if !empty {
+        eprintln!(
+            "memory: {} vehicles still live after 60 s",
+            server.registry().ctx().metrics.vehicles.get()
+        );
+    }
+    tokio::time::sleep(Duration::from_secs(2)).await;
+}
+
+/// Row 1/2: `n` new vehicle ids, one IMU sample each.
+async fn flood(server: &uavnavd::RunningServer, n: usize) {
+    let mut c = client(server).await;
+    let envs = (0..n)
+        .map(|i| imu_env(&format!("junk-{i}"), i as u64, vec![imu(1_000_000_000)]))
+        .collect();
+    let _ = ingest(&mut c, envs).await;
+}
+
+/// Row 3: far-future stamps, and a first sample at i64::MAX, before a vehicle's own stream.
+async fn time_gate(server: &uavnavd::RunningServer) {
+    let mut c = client(server).await;
+    let mut envs = vec![
+        imu_env("tg", 0, vec![imu(10_900_000_000)]),
+        imu_env("tg", 1, vec![imu(10_905_000_000)]),
+        imu_env("tg-max", 2, vec![imu(i64::MAX)]),
+    ];
+    for k in 0..400 {
+        let t = 1_000_000_000 + k * 5_000_000;
+        envs.push(imu_env("tg", 3 + k as u64, vec![imu(t)]));
+        envs.push(imu_env("tg-max", 3 + k as u64, vec![imu(t)]));
+    }
+    let _ = ingest(&mut c, envs).await;
+}
+
+/// Row 4: four 16 MiB `ImuBatch`es of empty samples at once (2 bytes each on the wire).
+async fn batch_bombs(server: &uavnavd::RunningServer, max_message_bytes: usize) {
+    let n = (max_message_bytes - 64) / 2;
+    let batch = [0x0A, 0x00].repeat(n);
+    let mut env = vec![0x0A, 4];
+    env.extend(b"bomb");
+    env.extend([0x10, 0x01, 0x1A]);
+    let mut len = batch.len() as u64;
+    while len >= 0x80 {
+        env.push((len as u8) | 0x80);
+        len >>= 7;
+    }
+    env.push(len as u8);
+    env.extend(batch);
+    let sends = (0..4).map(|_| {
+        let env = env.clone();
+        async move {
+            let channel =
+                tonic::transport::Endpoint::from_shared(format!("http://{}", server.grpc_addr))
+                    .unwrap()
+                    .connect()
+                    .await
+                    .unwrap();
+            let mut grpc = tonic::client::Grpc::new(channel).max_encoding_message_size(64 << 20);
+            grpc.ready().await.unwrap();
+            let path =
+                tonic::codegen::http::uri::PathAndQuery::from_static("/uavnav.v1.UavNav/Ingest");
+            let request = tonic::Request::new(futures::stream::iter(vec![env]));
+            let resp = grpc.streaming(request, path, RawCodec).await.unwrap();
+            let _ = resp.into_inner().message().await;
+        }
+    });
+    futures::future::join_all(sends).await;
+}
+
+/// Row 5: as many 2048×2048 cameras as `vision.max_total_camera_pixels` takes (one more is
+/// refused), each sent two real frames, plus a PNG bomb's header.
+async fn cameras(server: &uavnavd::RunningServer, total_pixels: u64) -> usize {
+    let side = 2048u32;
+    let image = image::GrayImage::from_fn(side, side, |x, y| {
+        image::Luma([((x * 7 + y * 13) % 251) as u8 ^ ((x / 16 + y / 16) % 2 * 255) as u8])
+    });
+    let mut jpeg = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 80)
+        .encode_image(&image)
+        .unwrap();
+    let mut config = vehicle_config(true);
+    let cam = config.camera.as_mut().unwrap();
+    (cam.width_px, cam.height_px) = (side, side);
+    (cam.cx_px, cam.cy_px) = (f64::from(side) / 2.0, f64::from(side) / 2.0);
+    let n = (total_pixels / u64::from(side * side)) as usize + 1;
+    let mut c = client(server).await;
+    let mut configured = 0;
+    for v in 0..n {
+        let id = format!("cam-{v}");
+        let r = c
+            .configure_vehicle(pb::ConfigureVehicleRequest {
+                vehicle_id: id.clone(),
+                config: Some(config),
+            })
+            .await;
+        if r.is_err() {
+            continue;
+        }
+        configured += 1;
+        let mut envs = Vec::new();
+        for k in 0..80i64 {
+            let t = 1_000_000_000 + k * 5_000_000;
+            envs.push(imu_env(&id, k as u64, vec![imu(t)]));
+            if k == 20 || k == 40 {
+                envs.push(camera_env(&id, 1000 + k as u64, t, jpeg.clone()));
+            }
+        }
+        let mut png = vec![
+            0x89, b'P', b'N', b'G', b'\r', b'\n', 0x1A, b'\n', 0, 0, 0, 13,
+        ];
+        png.extend(b"IHDR");
+        png.extend(65_535u32.to_be_bytes());
+        png.extend(65_535u32.to_be_bytes());
+        png.extend([16, 6, 0, 0, 0, 0, 0, 0, 0]);
+        png.resize(600, 0);
+        let mut bomb = camera_env(&id, 2000, 1_300_000_000, png);
+        if let Some(pb::sensor_envelope::Payload::Camera(f)) = bomb.payload.as_mut() {
+            f.image.as_mut().unwrap().format = "png".into();
+        }
+        envs.push(bomb);
+        let _ = ingest(&mut c, envs).await;
+    }
+    configured
+}
+
+/// Row 6: 1,100 idle TCP connections to the gRPC port, held 2 s.
+async fn idle_connections(server: &uavnavd::RunningServer) -> usize {
+    let mut held = Vec::new();
+    for _ in 0..1100 {
+        if let Ok(s) = tokio::net::TcpStream::connect(server.grpc_addr).await {
+            held.push(s);
+        }
+    }
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    held.len()
+}
+
+#[tokio::main(flavor = "multi_thread", worker_threads = 2)]
+async fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let ids = args
+        .iter()
+        .position(|a| a == "--ids")
+        .and_then(|i| args.get(i + 1))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(20_000usize);
+    let mut cfg = uavnav_tests::service::loopback_config();
+    uavnav_tests::service::listen_zenoh(&mut cfg);
+    cfg.vehicles.idle_evict_s = 2.0;
+    let budget = MemoryBudget::of(&cfg);
+    println!("the formula for this configuration:\n{budget}");
+    let (max_message, total_pixels) = (
+        cfg.grpc.max_message_bytes,
+        cfg.vision.max_total_camera_pixels,
+    );
+    let server = uavnavd::Server::start(cfg).await.unwrap();
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let sampler = Sampler::start();
+    let baseline = rss_bytes();
+    println!("baseline: {:.1} MiB", mib(baseline));
+    println!("{:<44} {:>10} {:>10}", "attack", "peak MiB", "after MiB");
+    let mut worst = 0u64;
+    let mut report = |what: &str, peak: u64, after: u64| {
+        worst = worst.max(peak);
+        println!("{what:<44} {:>10.1} {:>10.1}", mib(peak), mib(after));
+    };
+
+    sampler.take();
+    flood(&server, ids).await;
+    let peak = sampler.take();
+    quiet(&server).await;
+    report(
+        &format!("{ids} new ids, one IMU sample each"),
+        peak,
+        rss_bytes(),
+    );
+
+    sampler.take();
+    time_gate(&server).await;
+    let peak = sampler.take();
+    quiet(&server).await;
+    report("far-future and i64::MAX stamps", peak, rss_bytes());
+
+    sampler.take();
+    batch_bombs(&server, max_message).await;
+    let peak = sampler.take();
+    quiet(&server).await;
+    report("4 x 16 MiB batches of empty samples", peak, rss_bytes());
+
+    sampler.take();
+    let n = cameras(&server, total_pixels).await;
+    let peak = sampler.take();
+    quiet(&server).await;
+    report(
+        &format!("{n} 2048x2048 camera vehicles, PNG bomb"),
+        peak,
+        rss_bytes(),
+    );
+
+    sampler.take();
+    let n = idle_connections(&server).await;
+    let peak = sampler.take();
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    report(&format!("{n} idle TCP connections"), peak, rss_bytes());
+
+    quiet(&server).await;
+    let after = rss_bytes();
+    let (limit, back) = (budget.total(), after as f64 <= baseline as f64 * 1.2);
+    println!(
+        "peak {:.1} MiB against the formula's {:.1} MiB ({:.1} MiB without the gRPC arrivals term); \
+         after the attacks {:.1} MiB against a baseline of {:.1} MiB ({:+.0} %)",
+        mib(worst),
+        mib(limit),
+        mib(budget.without_grpc_arrivals()),
+        mib(after),
+        mib(baseline),
+        (after as f64 / baseline as f64 - 1.0) * 100.0
+    );
+    drop(sampler);
+    server.shutdown().await.unwrap();
+    let ok = worst <= limit && back;
+    if !ok {
+        eprintln!("memory: a target was missed");
+        std::process::exit(1);
+    }
+}

@@ -1,0 +1,197 @@
+//! The service's worst-case resident memory, from its configuration: every place that can hold
+//! memory in proportion to its input has a bound in bytes, and this sums them (`uavnavd
+//! --memory-budget` prints it; the README states the formula; `cargo bench -p uavnavd --bench
+//! memory` checks it under attack).
+//!
+//! ```text
+//! RSS ≤ base
+//!     + max_vehicles × vehicle                       (actors, estimators, reorder windows)
+//!     + min(max_vehicles × input_queue_bytes, input_bytes)             (queued sensor data)
+//!     + min(max_vehicles × camera_queue_bytes, vision.queue_bytes)     (queued camera frames)
+//!     + max_total_camera_pixels × front_end_per_pixel                  (vision front ends)
+//!     + (workers + vision.queue) × max_image_bytes
+//!       + workers × decode_per_pixel × max_camera_pixels               (vision jobs)
+//!     + record.queue_bytes                                             (recorder, when on)
+//!     + grpc.max_connections × max_streams_per_connection × 2 × max_message_bytes
+//!                                                                      (gRPC messages arriving)
+//!     + http.max_connections × http_connection
+//!     + zenoh_links × zenoh_link                                       (Zenoh, when on)
+//! ```
+//!
+//! The per-item constants below were measured on this service (release build, x86-64, mimalloc)
+//! and rounded up; the measured figures are in their docs.
+
+use crate::config::Config;
+
+/// The process with no vehicle and no connection: code, runtimes, the Zenoh session, the vision
+/// workers' stacks. Measured 27–33 MiB (release, Zenoh on).
+pub const BASE_BYTES: u64 = 64 << 20;
+
+/// One vehicle at its largest without camera: actor, queues' fixed parts, reorder window (its
+/// capacity), latency memory, the estimator with its IMU history and delayed-fusion buffer, the
+/// last pose batch and health report. Measured 38–44 kB per vehicle streaming IMU + GNSS (2,000
+/// vehicles), rounded up with room for the buffers that grow to their caps under disorder.
+pub const VEHICLE_BYTES: u64 = 256 << 10;
+
+/// Vision front end memory per configured camera pixel (image pyramids of two frames, gradients,
+/// tracks). Measured about 4.7 bytes per pixel (a 64 Mi pixel camera held +300 MB).
+pub const FRONT_END_BYTES_PER_PIXEL: u64 = 8;
+
+/// Decoded image memory per pixel while a vision job decodes a frame (a 16-bit RGBA PNG).
+pub const DECODE_BYTES_PER_PIXEL: u64 = 8;
+
+/// One HTTP connection (headers, a small body, hyper's buffers).
+pub const HTTP_CONNECTION_BYTES: u64 = 256 << 10;
+
+/// Zenoh transports the session accepts (its `transport/unicast/max_sessions` default).
+pub const ZENOH_LINKS: u64 = 1000;
+
+/// One Zenoh link's transmission and reception buffers (its batch size, 64 KiB, times the
+/// priority queues' batches, both ways).
+pub const ZENOH_LINK_BYTES: u64 = 4 << 20;
+
+/// One term of the budget.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Term {
+    /// What holds the memory.
+    pub what: &'static str,
+    /// The configuration that bounds it.
+    pub bound_by: &'static str,
+    /// Bytes.
+    pub bytes: u64,
+}
+
+/// The worst-case resident memory of a configuration, term by term.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MemoryBudget {
+    /// The terms.
+    pub terms: Vec<Term>,
+}
+
+impl MemoryBudget {
+    /// The budget of `config`.
+    pub fn of(config: &Config) -> Self {
+        let u = |x: usize| x as u64;
+        let v = u(config.vehicles.max_vehicles);
+        let vis = &config.vision;
+        let workers = u(vis.effective_workers());
+        let g = &config.grpc;
+        let mut terms = vec![
+            Term {
+                what: "process base",
+                bound_by: "constant",
+                bytes: BASE_BYTES,
+            },
+            Term {
+                what: "vehicles",
+                bound_by: "vehicles.max_vehicles",
+                bytes: v * VEHICLE_BYTES,
+            },
+            Term {
+                what: "queued sensor data",
+                bound_by: "vehicles.input_queue_bytes, vehicles.input_bytes",
+                bytes: (v * u(config.vehicles.input_queue_bytes))
+                    .min(u(config.vehicles.input_bytes)),
+            },
+            Term {
+                what: "queued camera frames",
+                bound_by: "vehicles.camera_queue_bytes, vision.queue_bytes",
+                bytes: (v * u(config.vehicles.camera_queue_bytes)).min(u(vis.queue_bytes)),
+            },
+            Term {
+                what: "vision front ends",
+                bound_by: "vision.max_total_camera_pixels",
+                bytes: vis.max_total_camera_pixels * FRONT_END_BYTES_PER_PIXEL,
+            },
+            Term {
+                what: "vision jobs",
+                bound_by: "vision.workers, vision.queue, vision.max_image_bytes, vision.max_camera_pixels",
+                bytes: (workers + u(vis.queue)) * u(vis.max_image_bytes)
+                    + workers * DECODE_BYTES_PER_PIXEL * vis.max_camera_pixels,
+            },
+            Term {
+                what: "gRPC messages arriving",
+                bound_by: "grpc.max_connections, grpc.max_streams_per_connection, grpc.max_message_bytes",
+                // tonic keeps each stream's receive buffer at the largest message it took, and
+                // a compressed message's decompressed copy beside it.
+                bytes: u(g.max_connections)
+                    * u64::from(g.max_streams_per_connection)
+                    * 2
+                    * u(g.max_message_bytes),
+            },
+            Term {
+                what: "HTTP connections",
+                bound_by: "http.max_connections",
+                bytes: u(config.http.max_connections) * HTTP_CONNECTION_BYTES,
+            },
+        ];
+        if config.record.directory.is_some() {
+            terms.push(Term {
+                what: "recorder queue",
+                bound_by: "record.queue_bytes",
+                bytes: config.record.queue_bytes,
+            });
+        }
+        if config.zenoh.enabled {
+            terms.push(Term {
+                what: "Zenoh links",
+                bound_by: "constant (Zenoh's max_sessions)",
+                bytes: ZENOH_LINKS * ZENOH_LINK_BYTES,
+            });
+        }
+        Self { terms }
+    }
+
+    /// The sum, bytes.
+    pub fn total(&self) -> u64 {
+        self.terms.iter().map(|t| t.bytes).sum()
+    }
+
+    /// The budget without the gRPC term: what the service can hold when no caller has messages
+    /// in flight (the attacks of the memory benchmark end their messages).
+    pub fn without_grpc_arrivals(&self) -> u64 {
+        self.terms
+            .iter()
+            .filter(|t| t.what != "gRPC messages arriving")
+            .map(|t| t.bytes)
+            .sum()
+    }
+}
+
+impl std::fmt::Display for MemoryBudget {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mib = |b: u64| b as f64 / f64::from(1u32 << 20);
+        for t in &self.terms {
+            writeln!(
+                f,
+                "{:>12.1} MiB  {:<24} ({})",
+                mib(t.bytes),
+                t.what,
+                t.bound_by
+            )?;
+        }
+        write!(f, "{:>12.1} MiB  worst case in all", mib(self.total()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_bound_of_the_configuration_moves_its_term() {
+        let mut c = Config::default();
+        c.zenoh.enabled = false;
+        let before = MemoryBudget::of(&c).total();
+        c.vehicles.max_vehicles /= 2;
+        let fewer = MemoryBudget::of(&c).total();
+        assert!(fewer < before);
+        c.vision.max_total_camera_pixels /= 2;
+        assert!(MemoryBudget::of(&c).total() < fewer);
+        c.zenoh.enabled = true;
+        let with_zenoh = MemoryBudget::of(&c);
+        assert!(with_zenoh.terms.iter().any(|t| t.what == "Zenoh links"));
+        assert!(with_zenoh.without_grpc_arrivals() < with_zenoh.total());
+        assert!(with_zenoh.to_string().contains("worst case in all"));
+    }
+}
