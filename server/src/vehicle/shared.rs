@@ -8,7 +8,7 @@ use tokio::sync::watch;
 use uavnav_core::VehicleConfig;
 use uavnav_proto::v1 as pb;
 
-use crate::validate::CameraSpec;
+use crate::ingest::validate::CameraSpec;
 
 /// Input kinds, in the order that breaks timestamp ties in the reorder window: the values are
 /// `SensorEvent::rank()` (IMU, GNSS, magnetometer, barometer, camera), the rule the dataset
@@ -336,7 +336,7 @@ pub struct VehicleShared {
     pub last_input_wall_ns: AtomicI64,
     /// Latest pose batch (a plain slot: nobody waits for changes, and a watch channel's sender
     /// would notify its waiter lists on every message).
-    pub latest_pose: Mutex<Option<Arc<crate::hub::PoseBatch>>>,
+    pub latest_pose: Mutex<Option<Arc<crate::output::hub::PoseBatch>>>,
     /// Latest health report.
     pub latest_health: watch::Sender<Option<Arc<pb::VehicleHealth>>>,
 }
@@ -393,7 +393,7 @@ impl VehicleShared {
     }
 
     /// The latest pose batch, if any.
-    pub fn latest_pose_batch(&self) -> Option<Arc<crate::hub::PoseBatch>> {
+    pub fn latest_pose_batch(&self) -> Option<Arc<crate::output::hub::PoseBatch>> {
         self.latest_pose
             .lock()
             .unwrap_or_else(|p| p.into_inner())
@@ -401,7 +401,7 @@ impl VehicleShared {
     }
 
     /// Records the latest pose batch.
-    pub fn set_latest_pose(&self, batch: Arc<crate::hub::PoseBatch>) {
+    pub fn set_latest_pose(&self, batch: Arc<crate::output::hub::PoseBatch>) {
         *self.latest_pose.lock().unwrap_or_else(|p| p.into_inner()) = Some(batch);
     }
 
