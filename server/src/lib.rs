@@ -16,7 +16,8 @@
 //! | [`transport::http`] | `/metrics`, `/livez`, `/readyz` |
 //! | [`ingest`] | the transport-neutral ingest path (validate, gate, route, count) |
 //! | [`ingest::validate`] | field-by-field input checks with precise statuses |
-//! | [`vehicle`] | the vehicles; its root is the shared face of a vehicle ([`vehicle::shared`]): counters, ingest time gate, latest pose/health |
+//! | [`ingest::gate`] | the ingest time gate: late, duplicate, backwards, future, clock resync |
+//! | [`vehicle`] | the vehicles; its root is the shared face of a vehicle ([`vehicle::shared`]): counters, the time gate's state, latest pose/health |
 //! | [`vehicle::registry`] | vehicle id → actor handle; creation on first data, removal on eviction |
 //! | [`vehicle::actor`] | one task per vehicle owning its engine; bounded queues, reorder, overload policy |
 //! | [`vehicle::reorder`] | the bounded timestamp reorder window |

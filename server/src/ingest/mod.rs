@@ -6,7 +6,9 @@
 //! |---|---|
 //! | `mod.rs` | the [`Ingestor`]: validate, gate, route, count |
 //! | [`validate`] | field-by-field input checks with precise statuses |
+//! | [`gate`] | the time gate: late, duplicate, backwards, future, clock resync |
 
+pub mod gate;
 pub mod validate;
 
 use std::sync::Arc;
@@ -14,13 +16,12 @@ use std::time::Instant;
 
 use uavnav_proto::v1 as pb;
 
+use crate::ingest::gate::{Admitted, GateLimits, GateRefusal};
 use crate::ingest::validate::{CameraSpec, ImageLimits, Rejection};
 use crate::metrics::{Kind, Outcome, Transport};
 use crate::vehicle::actor::{Input, Msg, SendError, Stamped, VehicleHandle};
 use crate::vehicle::registry::{Registry, RegistryError};
-use crate::vehicle::{
-    Admitted, GateLimits, GateRefusal, InputKind, VehicleStats, mono_now, wall_ns,
-};
+use crate::vehicle::{InputKind, VehicleStats, mono_now, wall_ns};
 
 /// One decoded input message: the wire contract's borrowed input, under the name the transports
 /// and the recorder know it by.

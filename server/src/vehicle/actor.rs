@@ -165,8 +165,8 @@ impl Ctx {
     }
 
     /// The time gate's limits.
-    pub fn gate_limits(&self) -> crate::vehicle::GateLimits {
-        crate::vehicle::GateLimits {
+    pub fn gate_limits(&self) -> crate::ingest::gate::GateLimits {
+        crate::ingest::gate::GateLimits {
             window_ns: self.window_ns(),
             max_future_ns: self.max_future_ns(),
             resync_samples: self.vehicles.clock_resync_samples,

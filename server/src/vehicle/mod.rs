@@ -5,7 +5,7 @@
 //! |---|---|
 //! | [`registry`] | vehicle id → actor handle; creation on first data, removal on eviction |
 //! | [`actor`] | one task per vehicle owning its engine; bounded queues, reorder, overload policy |
-//! | [`shared`] | the shared face of a vehicle: counters, ingest time gate state, latest pose/health (re-exported here) |
+//! | [`shared`] | the shared face of a vehicle: counters, the ingest time gate's state, latest pose/health (re-exported here) |
 //! | [`reorder`] | the bounded timestamp reorder window |
 //! | [`engine`] | the seam to the estimator ([`engine::Engine`]) |
 //! | [`runner_engine`] | the product engine (the estimator runner) |
@@ -19,7 +19,8 @@ pub mod runner_engine;
 pub mod shared;
 pub mod vision_pool;
 
-pub use shared::{
-    Admitted, GateLimits, GateRefusal, INPUT_KINDS, InputKind, TimeGate, VehicleShared,
-    VehicleStats, mono_now, wall_ns,
-};
+pub use shared::{INPUT_KINDS, InputKind, VehicleShared, VehicleStats, mono_now, wall_ns};
+
+/// The ingest time gate, re-exported at its former paths (`crate::vehicle::TimeGate`, ...), from
+/// before it moved to [`crate::ingest::gate`].
+pub use crate::ingest::gate::{Admitted, GateLimits, GateRefusal, TimeGate};
