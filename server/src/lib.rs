@@ -7,56 +7,62 @@
 //! |---|---|
 //! | [`config`] | defaults → TOML file → `UAVNAV_*` environment → CLI flags |
 //! | [`server`] | [`Server::start`]: binds the ports, wires everything, graceful shutdown |
-//! | [`registry`] | vehicle id → actor handle; creation on first data, removal on eviction |
-//! | [`actor`] | one task per vehicle owning its engine; bounded queues, reorder, overload policy |
-//! | [`vehicle`] | the shared face of a vehicle: counters, ingest time gate, latest pose/health |
-//! | [`reorder`] | the bounded timestamp reorder window |
-//! | [`engine`] | the seam to the estimator ([`engine::Engine`]) |
-//! | [`runner_engine`] | the product engine (the estimator runner) |
-//! | [`vision_pool`] | bounded OS-thread pool for vision work |
 //! | [`service`] | the transport-neutral facade the adapters call: authorization per request and message, then ingest or the registry |
+//! | [`transport`] | the adapters: they move bytes and call [`service`]; no domain logic |
+//! | [`transport::conn`] | every TCP listener's accept loop: connection limits, idle timeout, TLS handshakes, the file-descriptor budget |
+//! | [`transport::grpc`] | the tonic `uavnav.v1.UavNav` service |
+//! | [`transport::zenoh`] | the embedded Zenoh session: inputs, outputs, queryables, liveliness |
+//! | [`transport::zenoh_stats`] | what Zenoh dropped on congested links, read from its runtime into `/metrics` |
+//! | [`transport::http`] | `/metrics`, `/livez`, `/readyz` |
 //! | [`ingest`] | the transport-neutral ingest path (validate, gate, route, count) |
-//! | [`validate`] | field-by-field input checks with precise statuses |
-//! | [`conn`] | every TCP listener's accept loop: connection limits, idle timeout, TLS handshakes, the file-descriptor budget |
-//! | [`grpc`] | the tonic `uavnav.v1.UavNav` service |
-//! | [`zenoh_io`] | the embedded Zenoh session: inputs, outputs, queryables, liveliness |
 //! | [`budget`] | the worst-case resident memory of a configuration (`--memory-budget`) |
-//! | [`zenoh_stats`] | what Zenoh dropped on congested links, read from its runtime into `/metrics` |
-//! | [`hub`] | broadcast fan-out of poses and health |
+//! | [`ingest::validate`] | field-by-field input checks with precise statuses |
+//! | [`ingest::gate`] | the ingest time gate: late, duplicate, backwards, future, clock resync |
+//! | [`vehicle`] | the vehicles; its root is the shared face of a vehicle ([`vehicle::shared`]): counters, the time gate's state, latest pose/health |
+//! | [`vehicle::registry`] | vehicle id → actor handle; creation on first data, removal on eviction |
+//! | [`vehicle::actor`] | one task per vehicle owning its engine; bounded queues, reorder, overload policy |
+//! | [`vehicle::reorder`] | the bounded timestamp reorder window |
+//! | [`vehicle::engine`] | the seam to the estimator ([`vehicle::engine::Engine`]) |
+//! | [`vehicle::runner_engine`] | the product engine (the estimator runner) |
+//! | [`vehicle::vision_pool`] | bounded OS-thread pool for vision work |
+//! | [`output`] | what leaves the vehicles |
+//! | [`output::hub`] | broadcast fan-out of poses and health |
 //! | (crate `uavnav-liveview`) | the Foxglove live view (WebSocket): pose, path, GNSS fix and camera per vehicle |
-//! | [`health`] | per-vehicle health reports |
+//! | [`output::health`] | per-vehicle health reports |
+//! | [`output::record`] | recording of accepted inputs and poses to rotating MCAP files |
 //! | [`metrics`] | Prometheus metrics |
-//! | [`record`] | recording of accepted inputs and poses to rotating MCAP files |
-//! | [`http`] | `/metrics`, `/livez`, `/readyz` |
 //! | [`security`] | TLS (reloadable), principals and grants, the Zenoh access control, the exposure check |
 //! | [`shutdown`] | signals and the drain order |
 //! | [`logging`] | `tracing` subscriber setup |
+//!
+//! The modules that moved into `transport/`, `ingest/`, `vehicle/` and `output/` stay reachable at
+//! their former paths (`uavnavd::engine`, `uavnavd::registry`, `uavnavd::zenoh_io`, ...) through
+//! the re-exports below.
 
-pub mod actor;
 pub mod budget;
 pub mod config;
-pub mod conn;
-pub mod engine;
-pub mod grpc;
-pub mod health;
-pub mod http;
-pub mod hub;
 pub mod ingest;
 pub mod logging;
 pub mod metrics;
-pub mod record;
-pub mod registry;
-pub mod reorder;
-pub mod runner_engine;
+pub mod output;
 pub mod security;
 pub mod server;
 pub mod service;
 pub mod shutdown;
-pub mod validate;
+pub mod transport;
 pub mod vehicle;
-pub mod vision_pool;
-pub mod zenoh_io;
-pub mod zenoh_stats;
+
+/// Re-exported at its former path (`uavnavd::validate`), from before `ingest/`.
+pub use ingest::validate;
+/// Re-exported at their former paths (`uavnavd::hub`, ...), from before `output/`.
+pub use output::{health, hub, record};
+/// Re-exported at its former path and name (`uavnavd::zenoh_io`), from before `transport/`.
+pub use transport::zenoh as zenoh_io;
+/// Re-exported at their former paths (`uavnavd::conn`, ...), from before `transport/`.
+pub use transport::{conn, grpc, http, zenoh_stats};
+/// Re-exported at their former paths (`uavnavd::engine`, `uavnavd::registry`, ...), from before
+/// `vehicle/`.
+pub use vehicle::{actor, engine, registry, reorder, runner_engine, vision_pool};
 
 use std::process::ExitCode;
 

@@ -281,7 +281,7 @@ pub struct Metrics {
     /// Authentication and authorization refusals, TLS handshake failures.
     pub security: crate::security::SecurityMetrics,
     /// Connections open, refused and closed, by listener.
-    pub connections: crate::conn::ConnectionMetrics,
+    pub connections: crate::transport::conn::ConnectionMetrics,
 }
 
 impl Metrics {
@@ -437,7 +437,7 @@ impl Metrics {
             foxglove_dropped.clone(),
         );
         let security = crate::security::SecurityMetrics::register(&mut registry);
-        let connections = crate::conn::ConnectionMetrics::register(&mut registry);
+        let connections = crate::transport::conn::ConnectionMetrics::register(&mut registry);
         let imu_clipped = Counter::default();
         registry.register(
             "imu_clipped",

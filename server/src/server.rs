@@ -14,23 +14,23 @@ use tonic::codec::CompressionEncoding;
 use tracing::{info, warn};
 use uavnav_proto::v1::uav_nav_server::UavNavServer;
 
-use crate::actor::{Ctx, Msg};
 use crate::config::Config;
-use crate::conn::{self, ConnLimits, ListenerKind, TlsSide};
-use crate::engine::{SharedFactory, default_factory};
-use crate::grpc::{UavNavService, remap_transport_status};
-use crate::http::{HttpState, router};
-use crate::hub::Hub;
 use crate::ingest::Ingestor;
+use crate::ingest::validate::ImageLimits;
 use crate::metrics::Metrics;
-use crate::record::Recorder;
-use crate::registry::Registry;
+use crate::output::hub::Hub;
+use crate::output::record::Recorder;
 use crate::security::tls::{Alpn, CertStore};
 use crate::security::{Authorizer, exposure};
 use crate::service::Service;
-use crate::validate::ImageLimits;
-use crate::vision_pool::VisionPool;
-use crate::zenoh_io::ZenohIo;
+use crate::transport::conn::{self, ConnLimits, ListenerKind, TlsSide};
+use crate::transport::grpc::{UavNavService, remap_transport_status};
+use crate::transport::http::{HttpState, router};
+use crate::transport::zenoh::ZenohIo;
+use crate::vehicle::actor::{Ctx, Msg};
+use crate::vehicle::engine::{SharedFactory, default_factory};
+use crate::vehicle::registry::Registry;
+use crate::vehicle::vision_pool::VisionPool;
 use uavnav_liveview::{LiveTap, LiveView};
 
 /// How long the gRPC and HTTP servers get to finish in-flight calls at shutdown.
@@ -214,12 +214,14 @@ pub fn ingest_path(
         hub,
         pool,
         factory,
-        camera_bytes: crate::actor::CameraBytes {
+        camera_bytes: crate::vehicle::actor::CameraBytes {
             queued: Default::default(),
             limit: config.vision.queue_bytes,
         },
-        input_bytes: crate::actor::InputBytes::new(config.vehicles.input_bytes),
-        camera_pixels: crate::actor::CameraPixels::new(config.vision.max_total_camera_pixels),
+        input_bytes: crate::vehicle::actor::InputBytes::new(config.vehicles.input_bytes),
+        camera_pixels: crate::vehicle::actor::CameraPixels::new(
+            config.vision.max_total_camera_pixels,
+        ),
     });
     let limits = ImageLimits {
         max_bytes: config.vision.max_image_bytes,
@@ -371,7 +373,12 @@ async fn serve_http(
     let shutdown = async {
         let _ = stop_rx.await;
     };
-    let task = tokio::spawn(crate::http::serve(conns, app, header_timeout, shutdown));
+    let task = tokio::spawn(crate::transport::http::serve(
+        conns,
+        app,
+        header_timeout,
+        shutdown,
+    ));
     Ok((bound, (task, stop_tx)))
 }
 

@@ -10,11 +10,11 @@ use std::sync::Arc;
 
 use uavnav_proto::v1 as pb;
 
-use crate::actor::VehicleHandle;
+use crate::ingest::validate::{self, Rejection};
 use crate::ingest::{Ingestor, Payload, Verdict};
 use crate::metrics::{Cause, Metrics, Transport};
 use crate::security::{Access, AuthError, AuthTransport, Authorizer, Refusals, Verb};
-use crate::validate::{self, Rejection};
+use crate::vehicle::actor::VehicleHandle;
 
 /// The facade over the ingest path and the registry.
 #[derive(Debug, Clone)]
@@ -53,7 +53,7 @@ impl Service {
     }
 
     /// The output hub (what watches subscribe to).
-    pub fn hub(&self) -> &crate::hub::Hub {
+    pub fn hub(&self) -> &crate::output::hub::Hub {
         &self.ingestor.registry().ctx().hub
     }
 

@@ -4,9 +4,9 @@
 //! rotates them while drones fly), the verified client certificate's names are the caller's
 //! identity, and a handshake that never finishes must not hold the accept loop. So: one
 //! [`CertStore`] that re-reads the files when they change, and [`handshake`], which the
-//! connection layer ([`crate::conn`]) runs in a task of its own per connection (bounded in number
-//! by [`MAX_HANDSHAKES`] and in time by [`HANDSHAKE_TIMEOUT`]); the finished connection carries
-//! the peer's names as [`PeerInfo`].
+//! connection layer ([`crate::transport::conn`]) runs in a task of its own per connection
+//! (bounded in number by [`MAX_HANDSHAKES`] and in time by [`HANDSHAKE_TIMEOUT`]); the finished
+//! connection carries the peer's names as [`PeerInfo`].
 
 use std::io;
 use std::net::SocketAddr;

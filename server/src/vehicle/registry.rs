@@ -14,8 +14,8 @@ use std::sync::{Arc, RwLock, Weak};
 
 use uavnav_core::VehicleConfig;
 
-use crate::actor::{self, Ctx, VehicleHandle};
 use crate::vehicle::VehicleShared;
+use crate::vehicle::actor::{self, Ctx, VehicleHandle};
 
 /// How long an unconfigured vehicle must have been silent before a new vehicle may take its place
 /// at the vehicle limit, ns.

@@ -1,8 +1,9 @@
 //! The seam between the service and the estimation code: one [`Engine`] per vehicle.
 //!
 //! Actors only talk to this trait, so the fusion implementation behind it is swapped in one file.
-//! The product implementation ([`crate::runner_engine`]) wraps `uavnav_runner::VehicleRunner`
-//! (vision front end + estimator); tests may plug a scripted engine through [`EngineFactory`].
+//! The product implementation ([`crate::vehicle::runner_engine`]) wraps
+//! `uavnav_runner::VehicleRunner` (vision front end + estimator); tests may plug a scripted engine
+//! through [`EngineFactory`].
 //!
 //! An [`Engine`] names the type its vision jobs return ([`Engine::Vision`]); [`boxed`] pairs it
 //! with its outstanding job ([`VehicleEngine`], what the actor drives), so a job's result goes
@@ -18,7 +19,7 @@ use tokio::sync::oneshot;
 use uavnav_core::{SensorEvent, VehicleConfig};
 use uavnav_proto::v1 as pb;
 
-use crate::hub::Pose;
+use crate::output::hub::Pose;
 
 /// An error reported by an engine for one input; the actor counts it and goes on.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -314,5 +315,5 @@ pub type SharedFactory = Arc<dyn EngineFactory>;
 
 /// The product factory (the estimator runner with default parameters).
 pub fn default_factory() -> SharedFactory {
-    Arc::new(crate::runner_engine::RunnerFactory::default())
+    Arc::new(crate::vehicle::runner_engine::RunnerFactory::default())
 }

@@ -30,9 +30,9 @@ use uavnav_proto::input::InputRef;
 use uavnav_proto::v1 as pb;
 
 use crate::config::RecordConfig;
-use crate::hub::{Hub, PoseBatch};
 use crate::ingest::Payload;
 use crate::metrics::{Metrics, RecordDrop};
+use crate::output::hub::{Hub, PoseBatch};
 use crate::vehicle::wall_ns;
 
 /// After a failed open or write, the writer waits this long before opening a new file (records
@@ -43,7 +43,7 @@ pub const FILE_PREFIX: &str = "uavnavd-";
 /// What a queued record costs beyond its message bytes (the queue entry, the vehicle id).
 const ITEM_OVERHEAD: u64 = 64;
 /// Bytes one queued pose costs (poses are queued as plain data, encoded by the writer).
-const POSE_BYTES: u64 = std::mem::size_of::<crate::hub::Pose>() as u64;
+const POSE_BYTES: u64 = std::mem::size_of::<crate::output::hub::Pose>() as u64;
 
 /// Why the recorder could not start.
 #[derive(Debug, thiserror::Error)]

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use uavnav_proto::v1 as pb;
 
-use crate::engine::EngineHealth;
+use crate::vehicle::engine::EngineHealth;
 use crate::vehicle::{INPUT_KINDS, InputKind, VehicleShared, VehicleStats, wall_ns};
 
 /// The kinds in the order of [`HealthWindow`]'s counts.

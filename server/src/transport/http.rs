@@ -6,8 +6,9 @@
 //! open (an orchestrator's probe carries no credentials, and they tell nothing about vehicles).
 //!
 //! [`serve`] serves the router connection by connection over the service's own accept loop
-//! ([`crate::conn`]: limits, idle timeout, TLS) with hyper's HTTP/1 header timeout, so a client
-//! that dribbles its request headers (slowloris) is cut off after `http.header_timeout_s`.
+//! ([`crate::transport::conn`]: limits, idle timeout, TLS) with hyper's HTTP/1 header timeout, so
+//! a client that dribbles its request headers (slowloris) is cut off after
+//! `http.header_timeout_s`.
 
 use std::future::Future;
 use std::sync::Arc;
@@ -27,10 +28,10 @@ use hyper_util::service::TowerToHyperService;
 use tokio::sync::mpsc;
 use tracing::debug;
 
-use crate::conn::Conn;
 use crate::metrics::Metrics;
 use crate::security::AuthTransport;
 use crate::service::Service;
+use crate::transport::conn::Conn;
 
 /// What the HTTP handlers read.
 #[derive(Debug, Clone)]

@@ -26,9 +26,9 @@ use zenoh::key_expr::KeyExpr;
 use zenoh::liveliness::LivelinessToken;
 
 use crate::config::ZenohConfig;
-use crate::hub::{Hub, PoseBatch};
 use crate::ingest::{Ingestor, Payload};
 use crate::metrics::{Cause, Kind, Outcome, Transport};
+use crate::output::hub::{Hub, PoseBatch};
 use crate::security::{Access, SecurityConfig};
 use crate::service::Service;
 use crate::vehicle::VehicleStats;
@@ -139,7 +139,7 @@ impl ZenohIo {
             .await
             .map_err(|e| anyhow!("declaring the service liveliness token: {e}"))
             .context("zenoh.instance must be a valid key chunk")?;
-        let stats = crate::zenoh_stats::spawn_poll(
+        let stats = crate::transport::zenoh_stats::spawn_poll(
             runtime.clone(),
             service.metrics().zenoh_dropped.clone(),
         );
@@ -295,7 +295,7 @@ async fn decode_loop(
         // A batch's samples are counted on the wire, before anything is allocated: an empty
         // sample is 2 bytes encoded, 56 decoded.
         if kind == Kind::Imu {
-            let limit = crate::validate::MAX_IMU_BATCH;
+            let limit = crate::ingest::validate::MAX_IMU_BATCH;
             match uavnav_proto::wire::count_field(&bytes, 1) {
                 Ok(n) if n > limit => {
                     reject(
@@ -378,7 +378,7 @@ async fn spawn_queries(session: &Session, ingestor: Ingestor) -> anyhow::Result<
                 },
                 q = list.recv_async() => match q {
                     Ok(q) => {
-                        let vehicles = ingestor.registry().list("").iter().map(crate::grpc::summary_of).collect();
+                        let vehicles = ingestor.registry().list("").iter().map(crate::transport::grpc::summary_of).collect();
                         let body = pb::ListVehiclesResponse { vehicles }.encode_to_vec();
                         let _ = q.reply(keys::VEHICLES, body).encoding(encoding(names::LIST_VEHICLES_RESPONSE)).await;
                     }
@@ -413,7 +413,7 @@ fn spawn_liveliness(
     session: &Session,
     mut rx: broadcast::Receiver<(Arc<str>, bool)>,
     service: LivelinessToken,
-    registry: Arc<crate::registry::Registry>,
+    registry: Arc<crate::vehicle::registry::Registry>,
 ) -> JoinHandle<()> {
     let session = session.clone();
     tokio::spawn(async move {

@@ -9,11 +9,11 @@ use uavnav_runner::{
     Health, NoMeasurement, PoseOutput, RunnerParams, Step, VehicleRunner, VisionDone,
 };
 
-use crate::engine::{
+use crate::output::hub::Pose;
+use crate::vehicle::engine::{
     BoxedEngine, Engine, EngineError, EngineFactory, EngineHealth, EngineStep, FrameFailure,
     FrameFailureKind, VisionWork,
 };
-use crate::hub::Pose;
 
 /// Builds [`RunnerEngine`]s with the same parameters for every vehicle.
 #[derive(Debug, Clone)]
@@ -42,7 +42,7 @@ impl Default for RunnerFactory {
 
 impl EngineFactory for RunnerFactory {
     fn create(&self, config: &VehicleConfig) -> BoxedEngine {
-        crate::engine::boxed(RunnerEngine {
+        crate::vehicle::engine::boxed(RunnerEngine {
             runner: VehicleRunner::new(config.clone(), self.params.clone(), None),
             last_t_ns: 0,
             scratch: Step::default(),

@@ -17,12 +17,12 @@ use tonic::{Request, Response, Status, Streaming};
 use uavnav_proto::v1 as pb;
 use uavnav_proto::v1::uav_nav_server::UavNav;
 
-use crate::hub::PoseBatch;
 use crate::ingest::Payload;
+use crate::ingest::validate;
 use crate::metrics::{Cause, Kind, Outcome, Transport};
+use crate::output::hub::PoseBatch;
 use crate::security::{Access, AuthTransport, PeerInfo};
 use crate::service::Service;
-use crate::validate;
 
 /// Outgoing message queue of one watch stream.
 const WATCH_QUEUE: usize = 1024;
@@ -483,7 +483,7 @@ impl UavNav for UavNavService {
 }
 
 /// The list entry of one vehicle.
-pub fn summary_of(h: &crate::actor::VehicleHandle) -> pb::VehicleSummary {
+pub fn summary_of(h: &crate::vehicle::actor::VehicleHandle) -> pb::VehicleSummary {
     let s = &h.shared;
     let pose = s.pose();
     let mode = s
@@ -556,7 +556,7 @@ mod tests {
         for t_ns in 0..total {
             let batch = PoseBatch {
                 vehicle_id: "uav-1".into(),
-                poses: vec![crate::hub::Pose {
+                poses: vec![crate::output::hub::Pose {
                     t_ns,
                     ..Default::default()
                 }],

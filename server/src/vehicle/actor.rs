@@ -1,11 +1,11 @@
 //! One actor per vehicle: a cloneable [`VehicleHandle`] and a task that alone owns the vehicle's
-//! [`Engine`](crate::engine::Engine).
+//! [`Engine`](crate::vehicle::engine::Engine).
 //!
 //! One bounded, ordered queue feeds the task (sensor data, configuration, reset, stop); senders
 //! wait when it is full, so IMU is never shed. Camera frames are shed instead of waiting when the
 //! vehicle already has `vehicles.camera_queue` frames queued, or when the vision pool is saturated
 //! at the moment the frame is due. Inputs pass through a [`ReorderBuffer`] and reach the engine in
-//! timestamp order; vision jobs run on the [`VisionPool`](crate::vision_pool::VisionPool).
+//! timestamp order; vision jobs run on the [`VisionPool`](crate::vehicle::vision_pool::VisionPool).
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -18,15 +18,15 @@ use uavnav_core::{
 };
 
 use crate::config::VehiclesConfig;
-use crate::engine::{
+use crate::metrics::Metrics;
+use crate::output::health::HealthWindow;
+use crate::output::hub::{Hub, Pose, PoseBatch};
+use crate::vehicle::engine::{
     ActorStep, BoxedEngine, FrameFailureKind, PoolJob, SharedFactory, VisionOutcome,
 };
-use crate::health::HealthWindow;
-use crate::hub::{Hub, Pose, PoseBatch};
-use crate::metrics::Metrics;
-use crate::reorder::{Refused, ReorderBuffer};
+use crate::vehicle::reorder::{Refused, ReorderBuffer};
+use crate::vehicle::vision_pool::VisionPool;
 use crate::vehicle::{InputKind, VehicleShared, VehicleStats, mono_now};
-use crate::vision_pool::VisionPool;
 
 /// Most inputs held in one reorder window whatever their timestamps (memory bound).
 const REORDER_CAPACITY: usize = 4096;
@@ -165,8 +165,8 @@ impl Ctx {
     }
 
     /// The time gate's limits.
-    pub fn gate_limits(&self) -> crate::vehicle::GateLimits {
-        crate::vehicle::GateLimits {
+    pub fn gate_limits(&self) -> crate::ingest::gate::GateLimits {
+        crate::ingest::gate::GateLimits {
             window_ns: self.window_ns(),
             max_future_ns: self.max_future_ns(),
             resync_samples: self.vehicles.clock_resync_samples,

@@ -1,19 +1,27 @@
 //! The transport-neutral ingest path: gRPC and Zenoh both hand their decoded messages to
 //! [`Ingestor`], which validates them, runs the vehicle's time gate, applies the overload policy
 //! and routes them to the vehicle's actor. Every outcome is counted (vehicle health + metrics).
+//!
+//! | file | responsibility |
+//! |---|---|
+//! | `mod.rs` | the [`Ingestor`]: validate, gate, route, count |
+//! | [`validate`] | field-by-field input checks with precise statuses |
+//! | [`gate`] | the time gate: late, duplicate, backwards, future, clock resync |
+
+pub mod gate;
+pub mod validate;
 
 use std::sync::Arc;
 use std::time::Instant;
 
 use uavnav_proto::v1 as pb;
 
-use crate::actor::{Input, Msg, SendError, Stamped, VehicleHandle};
+use crate::ingest::gate::{Admitted, GateLimits, GateRefusal};
+use crate::ingest::validate::{CameraSpec, ImageLimits, Rejection};
 use crate::metrics::{Kind, Outcome, Transport};
-use crate::registry::{Registry, RegistryError};
-use crate::validate::{self, CameraSpec, ImageLimits, Rejection};
-use crate::vehicle::{
-    Admitted, GateLimits, GateRefusal, InputKind, VehicleStats, mono_now, wall_ns,
-};
+use crate::vehicle::actor::{Input, Msg, SendError, Stamped, VehicleHandle};
+use crate::vehicle::registry::{Registry, RegistryError};
+use crate::vehicle::{InputKind, VehicleStats, mono_now, wall_ns};
 
 /// One decoded input message: the wire contract's borrowed input, under the name the transports
 /// and the recorder know it by.
@@ -151,7 +159,7 @@ pub struct Ingestor {
     /// The Foxglove live view, shown every accepted GNSS fix and camera frame.
     live: Option<uavnav_liveview::LiveTap>,
     /// The recorder, handed every accepted input.
-    record: Option<crate::record::RecordTap>,
+    record: Option<crate::output::record::RecordTap>,
 }
 
 impl Ingestor {
@@ -167,7 +175,7 @@ impl Ingestor {
     }
 
     /// Records every accepted input.
-    pub fn with_recorder(mut self, tap: crate::record::RecordTap) -> Self {
+    pub fn with_recorder(mut self, tap: crate::output::record::RecordTap) -> Self {
         self.record = Some(tap);
         self
     }

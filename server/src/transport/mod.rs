@@ -1,0 +1,16 @@
+//! Transport adapters: they move bytes and call the service facade ([`crate::service`]); no domain
+//! logic here.
+//!
+//! | file | adapter |
+//! |---|---|
+//! | [`conn`] | every TCP listener's accept loop: connection limits, idle timeout, TLS handshakes, the file-descriptor budget |
+//! | [`grpc`] | the tonic `uavnav.v1.UavNav` service |
+//! | [`http`] | `/metrics`, `/livez`, `/readyz` |
+//! | [`zenoh`] | the embedded Zenoh session: inputs, outputs, queryables, liveliness |
+//! | [`zenoh_stats`] | what Zenoh dropped on congested links, read from its runtime into `/metrics` |
+
+pub mod conn;
+pub mod grpc;
+pub mod http;
+pub mod zenoh;
+pub mod zenoh_stats;
