@@ -9,9 +9,9 @@
 //! vehicle already runs with, so a stream that broke without a restart loses nothing by it);
 //! counted in [`IngestStats::configs_resent`]. An ack saying `needs_config` (the service forgot
 //! a vehicle this client configured: an idle eviction, a restart the stream did not see) makes
-//! the driver re-send that vehicle's configuration in the same stream (while it is open), once until it is
-//! acknowledged, also counted there. Over Zenoh each message is a `put`
-//! on the vehicle's key (congestion control `Block`: never dropped locally); there are no acks.
+//! the driver re-send that vehicle's configuration in the same stream (while it is open), once
+//! until it is acknowledged, also counted there. Over Zenoh each message is a `put` on the
+//! vehicle's key (congestion control `Block`: never dropped locally); there are no acks.
 //!
 //! Refusals are not retried: an ack `PERMISSION_DENIED` (a vehicle outside the caller's grants)
 //! is counted with its reason ([`IngestStats::permission_denied`]); a stream refused as a whole
@@ -419,11 +419,7 @@ impl Configs {
     /// The remembered configuration of vehicle `id` as an envelope to re-send, if any.
     fn envelope(&self, id: &str) -> Option<pb::SensorEnvelope> {
         let m = self.0.lock().ok()?;
-        m.get(id).map(|c| pb::SensorEnvelope {
-            vehicle_id: id.to_string(),
-            sequence: RESENT_SEQUENCE,
-            payload: Some(Payload::Config(*c)),
-        })
+        m.get(id).map(|c| resent(id, c))
     }
 
     /// Every remembered configuration as an envelope to re-send.
@@ -431,13 +427,16 @@ impl Configs {
         let Ok(m) = self.0.lock() else {
             return Vec::new();
         };
-        m.iter()
-            .map(|(id, c)| pb::SensorEnvelope {
-                vehicle_id: id.clone(),
-                sequence: RESENT_SEQUENCE,
-                payload: Some(Payload::Config(*c)),
-            })
-            .collect()
+        m.iter().map(|(id, c)| resent(id, c)).collect()
+    }
+}
+
+/// A re-sent configuration of vehicle `id`.
+fn resent(id: &str, config: &pb::VehicleConfig) -> pb::SensorEnvelope {
+    pb::SensorEnvelope {
+        vehicle_id: id.to_string(),
+        sequence: RESENT_SEQUENCE,
+        payload: Some(Payload::Config(*config)),
     }
 }
 

@@ -125,24 +125,7 @@ async fn batch_bombs(server: &uavnavd::RunningServer, max_message_bytes: usize) 
     }
     env.push(len as u8);
     env.extend(batch);
-    let sends = (0..4).map(|_| {
-        let env = env.clone();
-        async move {
-            let channel =
-                tonic::transport::Endpoint::from_shared(format!("http://{}", server.grpc_addr))
-                    .unwrap()
-                    .connect()
-                    .await
-                    .unwrap();
-            let mut grpc = tonic::client::Grpc::new(channel).max_encoding_message_size(64 << 20);
-            grpc.ready().await.unwrap();
-            let path =
-                tonic::codegen::http::uri::PathAndQuery::from_static("/uavnav.v1.UavNav/Ingest");
-            let request = tonic::Request::new(futures::stream::iter(vec![env]));
-            let resp = grpc.streaming(request, path, RawCodec).await.unwrap();
-            let _ = resp.into_inner().message().await;
-        }
-    });
+    let sends = (0..4).map(|_| raw_first_ack(server, env.clone()));
     futures::future::join_all(sends).await;
 }
 

@@ -214,12 +214,12 @@ pub fn ingest_path(
         hub,
         pool,
         factory,
-        camera_bytes: crate::vehicle::actor::CameraBytes {
+        camera_bytes: crate::vehicle::budgets::CameraBytes {
             queued: Default::default(),
             limit: config.vision.queue_bytes,
         },
-        input_bytes: crate::vehicle::actor::InputBytes::new(config.vehicles.input_bytes),
-        camera_pixels: crate::vehicle::actor::CameraPixels::new(
+        input_bytes: crate::vehicle::budgets::InputBytes::new(config.vehicles.input_bytes),
+        camera_pixels: crate::vehicle::budgets::CameraPixels::new(
             config.vision.max_total_camera_pixels,
         ),
     });

@@ -59,21 +59,6 @@ fn envelope(id: &str, batch: &[u8]) -> Vec<u8> {
     e
 }
 
-/// The first ack of a stream carrying `body`.
-async fn first_ack(server: &uavnavd::RunningServer, body: Vec<u8>) -> pb::IngestAck {
-    let channel = tonic::transport::Endpoint::from_shared(format!("http://{}", server.grpc_addr))
-        .unwrap()
-        .connect()
-        .await
-        .unwrap();
-    let mut grpc = tonic::client::Grpc::new(channel).max_encoding_message_size(64 << 20);
-    grpc.ready().await.unwrap();
-    let path = tonic::codegen::http::uri::PathAndQuery::from_static("/uavnav.v1.UavNav/Ingest");
-    let request = tonic::Request::new(futures::stream::iter(vec![body]));
-    let resp = grpc.streaming(request, path, RawCodec).await.unwrap();
-    resp.into_inner().message().await.unwrap().unwrap()
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_16_mib_batch_of_empty_samples_is_refused_before_it_is_decoded() {
     let mut cfg = test_config();
@@ -99,7 +84,8 @@ async fn a_16_mib_batch_of_empty_samples_is_refused_before_it_is_decoded() {
     assert_eq!(decoded, n);
 
     // gRPC: refused in its ack, the stream intact.
-    let (ack, grpc_mb) = peak_growth_mb(first_ack(&server, env.clone())).await;
+    let (ack, grpc_mb) =
+        peak_growth_mb(async { raw_first_ack(&server, env.clone()).await.unwrap() }).await;
     assert_eq!(
         ack.status,
         pb::IngestStatus::ResourceExhausted as i32,

@@ -114,13 +114,7 @@ async fn raw_call(
     path: &'static str,
     bodies: Vec<Vec<u8>>,
 ) -> tonic::Status {
-    let channel = tonic::transport::Endpoint::from_shared(format!("http://{}", server.grpc_addr))
-        .unwrap()
-        .connect()
-        .await
-        .unwrap();
-    let mut grpc = tonic::client::Grpc::new(channel).max_encoding_message_size(64 << 20);
-    grpc.ready().await.unwrap();
+    let mut grpc = raw_grpc(server).await;
     let path = tonic::codegen::http::uri::PathAndQuery::from_static(path);
     let request = tonic::Request::new(futures::stream::iter(bodies));
     match grpc.streaming(request, path, RawCodec).await {

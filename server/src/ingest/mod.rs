@@ -17,9 +17,10 @@ use std::time::Instant;
 use uavnav_proto::v1 as pb;
 
 use crate::ingest::gate::{Admitted, GateLimits, GateRefusal};
-use crate::ingest::validate::{CameraSpec, ImageLimits, Rejection};
+use crate::ingest::validate::{ImageLimits, Rejection};
 use crate::metrics::{Kind, Outcome, Transport};
 use crate::vehicle::actor::{Input, Msg, SendError, Stamped, VehicleHandle};
+use crate::vehicle::budgets::camera_pixels;
 use crate::vehicle::registry::{Registry, RegistryError};
 use crate::vehicle::{InputKind, VehicleStats, mono_now, wall_ns};
 
@@ -489,13 +490,11 @@ impl Ingestor {
         validate::vehicle_id(id)?;
         let (config, spec) = validate::vehicle_config(c, self.limits)?;
         // The global pixel budget: this vehicle's camera replaces what it had.
-        let pixels =
-            |c: Option<CameraSpec>| c.map_or(0, |c| u64::from(c.width) * u64::from(c.height));
         let old_px = self
             .registry
             .get(id)
-            .map_or(0, |h| pixels(h.shared.camera()));
-        let new_px = pixels(spec);
+            .map_or(0, |h| camera_pixels(h.shared.camera()));
+        let new_px = camera_pixels(spec);
         let budget = &self.registry.ctx().camera_pixels;
         if !budget.swap(old_px, new_px) {
             return Err(Rejection::exhausted(format!(

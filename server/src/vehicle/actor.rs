@@ -11,7 +11,7 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use tokio::sync::{OwnedSemaphorePermit, Semaphore, mpsc, oneshot};
+use tokio::sync::{mpsc, oneshot};
 use tracing::{Span, debug, info_span, warn};
 use uavnav_core::{
     BaroSample, CameraFrame, GnssFix, ImuSample, MagSample, SensorEvent, VehicleConfig,
@@ -21,10 +21,12 @@ use crate::config::VehiclesConfig;
 use crate::metrics::Metrics;
 use crate::output::health::HealthWindow;
 use crate::output::hub::{Hub, Pose, PoseBatch};
+use crate::vehicle::budgets::{CameraBytes, CameraPixels, InputBytes, Reserved};
 use crate::vehicle::engine::{
     ActorStep, BoxedEngine, FrameFailureKind, PoolJob, SharedFactory, VisionOutcome,
 };
 use crate::vehicle::reorder::{Refused, ReorderBuffer};
+use crate::vehicle::ticks::{IDLE_HEALTH_EVERY, Ticks};
 use crate::vehicle::vision_pool::VisionPool;
 use crate::vehicle::{InputKind, VehicleShared, VehicleStats, mono_now};
 
@@ -60,97 +62,9 @@ pub struct Ctx {
     pub camera_pixels: CameraPixels,
 }
 
-/// The global budget of configured camera pixels.
-#[derive(Debug, Default)]
-pub struct CameraPixels {
-    used: std::sync::atomic::AtomicU64,
-    /// Most pixels configured at once.
-    pub limit: u64,
-}
-
-impl CameraPixels {
-    /// A budget of `limit` pixels.
-    pub fn new(limit: u64) -> Self {
-        Self {
-            used: Default::default(),
-            limit,
-        }
-    }
-
-    /// Replaces a vehicle's `old` camera pixels by `new`; false (nothing changed) when that
-    /// would exceed the limit.
-    pub fn swap(&self, old: u64, new: u64) -> bool {
-        use std::sync::atomic::Ordering::AcqRel;
-        if new <= old {
-            self.used.fetch_sub(old - new, AcqRel);
-            return true;
-        }
-        let more = new - old;
-        let before = self.used.fetch_add(more, AcqRel);
-        if before + more > self.limit {
-            self.used.fetch_sub(more, AcqRel);
-            return false;
-        }
-        true
-    }
-
-    /// Pixels configured now.
-    pub fn used(&self) -> u64 {
-        self.used.load(std::sync::atomic::Ordering::Acquire)
-    }
-}
-
-/// A byte budget of queued sensor data: a semaphore with one permit per byte. A message holds
-/// its permits until the actor takes it off the queue.
-#[derive(Debug, Clone)]
-pub struct InputBytes {
-    permits: Arc<Semaphore>,
-    limit: usize,
-}
-
-impl InputBytes {
-    /// A budget of `limit` bytes.
-    pub fn new(limit: usize) -> Self {
-        let limit = limit.min(Semaphore::MAX_PERMITS);
-        Self {
-            permits: Arc::new(Semaphore::new(limit)),
-            limit,
-        }
-    }
-
-    /// Waits for `bytes` (at most the whole budget, so that one large message always fits an
-    /// empty queue).
-    async fn reserve(&self, bytes: usize) -> Option<OwnedSemaphorePermit> {
-        let n = u32::try_from(bytes.min(self.limit)).unwrap_or(u32::MAX);
-        Arc::clone(&self.permits).acquire_many_owned(n).await.ok()
-    }
-
-    /// Bytes reserved now.
-    pub fn used(&self) -> usize {
-        self.limit - self.permits.available_permits().min(self.limit)
-    }
-}
-
-/// The bytes a queued data message holds of its vehicle's and of the global budget, given back
-/// when the actor takes it.
-#[derive(Debug, Default)]
-pub struct Reserved {
-    _vehicle: Option<OwnedSemaphorePermit>,
-    _global: Option<OwnedSemaphorePermit>,
-}
-
 /// Decoded bytes a queued batch of `n` inputs holds (the queue's slot and the samples).
 pub fn batch_bytes(batch: &[Stamped]) -> usize {
     std::mem::size_of::<Msg>() + std::mem::size_of_val(batch)
-}
-
-/// The global byte budget of the camera queues.
-#[derive(Debug, Default)]
-pub struct CameraBytes {
-    /// Compressed bytes of the frames queued at every actor.
-    pub queued: std::sync::atomic::AtomicUsize,
-    /// Most bytes queued at once (`vision.queue_bytes`).
-    pub limit: usize,
 }
 
 impl Ctx {
@@ -441,58 +355,6 @@ fn counted_since(last: &mut u64, now: u64) -> u64 {
     *last = now;
     gained
 }
-
-/// The health ticks of one actor: start + k * period.
-#[derive(Debug)]
-struct Ticks {
-    start: tokio::time::Instant,
-    period: Duration,
-    /// The tick the timer is set for.
-    scheduled: u64,
-    /// The tick of the last report.
-    reported: u64,
-    /// The timer is set beyond the next period (the vehicle was idle at the last tick).
-    idle: bool,
-}
-
-impl Ticks {
-    fn new(start: tokio::time::Instant, period: Duration) -> Self {
-        Self {
-            start,
-            period: period.max(Duration::from_millis(1)),
-            scheduled: 0,
-            reported: 0,
-            idle: false,
-        }
-    }
-
-    fn at(&self, k: u64) -> tokio::time::Instant {
-        let ns = self.period.as_nanos().saturating_mul(u128::from(k));
-        self.start + Duration::from_nanos(u64::try_from(ns).unwrap_or(u64::MAX / 2))
-    }
-
-    /// The tick `t` is in (the last one at or before it).
-    fn index_at(&self, t: tokio::time::Instant) -> u64 {
-        let since = t.saturating_duration_since(self.start).as_nanos();
-        u64::try_from(since / self.period.as_nanos()).unwrap_or(u64::MAX / 2)
-    }
-
-    /// The first tick after `t`.
-    fn next_after(&self, t: tokio::time::Instant) -> u64 {
-        self.index_at(t) + 1
-    }
-
-    /// The first tick at or after `t`.
-    fn index_at_or_after(&self, t: tokio::time::Instant) -> u64 {
-        let k = self.index_at(t);
-        if self.at(k) >= t { k } else { k + 1 }
-    }
-}
-
-/// An idle vehicle (no message for a whole period, nothing held) reports its health once in this
-/// many periods instead of every period: an idle fleet costs next to nothing, and a watcher
-/// still sees each idle vehicle alive (10 s at the default period).
-pub const IDLE_HEALTH_EVERY: u32 = 10;
 
 impl Actor {
     /// The event loop; returns whether the actor was evicted for idleness.
@@ -845,43 +707,7 @@ impl Actor {
 
 #[cfg(test)]
 mod tests {
-    use super::{CameraPixels, InputBytes, counted_since};
-
-    #[tokio::test]
-    async fn queued_bytes_wait_for_room_and_come_back_when_taken() {
-        let budget = InputBytes::new(1000);
-        let a = budget.reserve(600).await;
-        assert_eq!(budget.used(), 600);
-        // 600 more do not fit: the sender waits until the first message is taken.
-        let mut second = Box::pin(budget.reserve(600));
-        assert!(
-            futures::poll!(second.as_mut()).is_pending(),
-            "reserved beyond the budget"
-        );
-        drop(a);
-        let b = second.await;
-        assert_eq!(budget.used(), 600);
-        drop(b);
-        // A message larger than the whole budget still passes an empty queue.
-        let big = budget.reserve(5000).await;
-        assert_eq!(budget.used(), 1000);
-        drop(big);
-        assert_eq!(budget.used(), 0);
-    }
-
-    #[test]
-    fn camera_pixels_are_budgeted_across_vehicles() {
-        let px = CameraPixels::new(1000);
-        assert!(px.swap(0, 600));
-        assert!(!px.swap(0, 600), "over the budget");
-        assert_eq!(px.used(), 600);
-        assert!(
-            px.swap(600, 1000),
-            "a vehicle's own pixels are replaced, not added"
-        );
-        assert!(px.swap(1000, 0));
-        assert_eq!(px.used(), 0);
-    }
+    use super::counted_since;
 
     #[test]
     fn engine_counters_are_counted_across_engine_restarts() {

@@ -139,11 +139,9 @@ impl Registry {
                 map.shrink_to_fit();
             }
             // Its camera's pixels go back to the global budget.
-            if let Some(c) = shared.camera() {
-                reg.ctx
-                    .camera_pixels
-                    .swap(u64::from(c.width) * u64::from(c.height), 0);
-            }
+            reg.ctx
+                .camera_pixels
+                .swap(crate::vehicle::budgets::camera_pixels(shared.camera()), 0);
             if evicted {
                 reg.ctx.metrics.evictions.inc();
             }

@@ -265,6 +265,28 @@ impl tonic::codec::Decoder for AckDecoder {
     }
 }
 
+/// A raw gRPC client of `server`: encoded bodies in, acks out (with [`RawCodec`]), messages up to
+/// 64 MiB, so that oversize and malformed bodies reach the service as they are.
+pub async fn raw_grpc(server: &RunningServer) -> tonic::client::Grpc<tonic::transport::Channel> {
+    let channel = tonic::transport::Endpoint::from_shared(format!("http://{}", server.grpc_addr))
+        .unwrap()
+        .connect()
+        .await
+        .unwrap();
+    let mut grpc = tonic::client::Grpc::new(channel).max_encoding_message_size(64 << 20);
+    grpc.ready().await.unwrap();
+    grpc
+}
+
+/// The first ack of an `Ingest` stream carrying `body` (an encoded envelope), if any.
+pub async fn raw_first_ack(server: &RunningServer, body: Vec<u8>) -> Option<pb::IngestAck> {
+    let mut grpc = raw_grpc(server).await;
+    let path = tonic::codegen::http::uri::PathAndQuery::from_static("/uavnav.v1.UavNav/Ingest");
+    let request = tonic::Request::new(futures::stream::iter(vec![body]));
+    let resp = grpc.streaming(request, path, RawCodec).await.ok()?;
+    resp.into_inner().message().await.ok().flatten()
+}
+
 /// A Zenoh peer session that connects to `connect` only (no listener, no multicast scouting), so
 /// parallel tests never meet.
 pub async fn zenoh_peer(connect: &str) -> zenoh::Session {
