@@ -28,6 +28,15 @@ use nalgebra::{Matrix2, Matrix3, UnitQuaternion, Vector2, Vector3};
 /// Number of heading hypotheses (72° apart: each EKF's linearisation covers ±36°).
 pub const N_MODELS: usize = 5;
 
+/// Longest gap between GNSS velocities across which the models' predicted velocities still say
+/// something about their headings, s. Over a longer gap each model's velocity integrates its own
+/// tilt error and the vibration (a 2° tilt error is 2.3 m/s after 6.6 s, the random walk of
+/// `accel_sigma_mps2` only 0.4 m/s): every innovation is then huge and the likelihoods crown a
+/// model by chance, with a small σ (a real copter whose log lost GNSS for 4–7 s at a time was
+/// aligned 150° wrong at σ 5° that way). After such a gap the velocities are re-anchored on the
+/// fix and the weights left as they were.
+pub const MAX_VEL_GAP_S: f64 = 2.0;
+
 /// Tuning of the yaw estimator, with documented defaults.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct YawEstimatorParams {
@@ -199,9 +208,11 @@ impl YawEstimator {
             return;
         }
         let sigma = sigma_mps.max(self.params.min_vel_sigma_mps);
+        let mut after_gap = false;
         if let Some((t0, v0)) = self.last_vel {
             let dt = (t_ns - t0) as f64 * 1e-9;
-            if dt > 0.05 && dt < 2.0 {
+            after_gap = dt > MAX_VEL_GAP_S;
+            if dt > 0.05 && dt <= MAX_VEL_GAP_S {
                 let a = (v - v0) / dt;
                 // low-pass: GNSS velocity differences are noisy
                 self.accel_kin += (a - self.accel_kin) * 0.5;
@@ -213,6 +224,11 @@ impl YawEstimator {
         self.last_vel = Some((t_ns, v));
         if !self.started {
             self.start(v, sigma);
+            return;
+        }
+        if after_gap {
+            self.reanchor(v, sigma);
+            self.last_t_ns = t_ns;
             return;
         }
         let r = sigma * sigma;
@@ -295,6 +311,18 @@ impl YawEstimator {
         self.started = true;
     }
 
+    /// After a gap in the velocities ([`MAX_VEL_GAP_S`]): every model's velocity is set to the
+    /// fix with the fix's σ and no correlation with its heading, which keeps its own σ; the
+    /// weights stay, and the heading must hold steady anew before it counts as converged.
+    fn reanchor(&mut self, v: Vector2<f64>, sigma: f64) {
+        for m in &mut self.models {
+            m.v = v;
+            let yaw_var = m.p[(2, 2)];
+            m.p = Matrix3::from_diagonal(&Vector3::new(sigma * sigma, sigma * sigma, yaw_var));
+        }
+        self.steady_since = None;
+    }
+
     /// The composite heading and its σ, rad (`None` before the bank starts).
     pub fn yaw(&self) -> Option<(f64, f64)> {
         if !self.started {
@@ -375,6 +403,23 @@ mod tests {
                 sigma.to_degrees()
             );
         }
+    }
+
+    #[test]
+    fn a_gap_in_the_velocities_reanchors_instead_of_weighing() {
+        let mut e = fly(0.3);
+        let before = e.weights();
+        assert!(e.converged_yaw().is_some());
+        // 6 s without GNSS while a biased accelerometer integrates 0.35 m/s² sideways.
+        let f_b = Vector3::new(0.0, 0.35, -9.80665);
+        for _ in 0..600 {
+            e.predict(&Vector3::zeros(), &f_b, 0.01);
+        }
+        let t = e.last_t_ns + 6_000_000_000;
+        e.fuse_velocity(t, Vector2::new(1.0, 2.0), 0.2);
+        assert_eq!(e.weights(), before, "a fix after a gap weighs nothing");
+        assert!(e.models.iter().all(|m| m.v == Vector2::new(1.0, 2.0)));
+        assert!(e.converged_yaw().is_none(), "convergence is earned anew");
     }
 
     #[test]

@@ -209,14 +209,24 @@ fn trace() {
         if p.t_ns < next {
             continue;
         }
-        next += 5 * S;
+        next += std::env::var("UAVNAV_TRACE_STEP_MS")
+            .ok()
+            .and_then(|v| v.parse::<i64>().ok())
+            .map_or(5 * S, |ms| ms * 1_000_000);
         while j + 1 < f.reference.len() && f.reference[j + 1].t_ns <= p.t_ns {
             j += 1;
         }
-        let ry = f
+        let (rr, rp, ry) = f
             .reference
             .get(j)
-            .map_or(f64::NAN, |r| r.q.euler_angles().2);
+            .map_or((f64::NAN, f64::NAN, f64::NAN), |r| r.q.euler_angles());
+        eprint!(
+            "rp {:6.1} {:6.1} ref {:6.1} {:6.1} ",
+            p.euler_rad.x.to_degrees(),
+            p.euler_rad.y.to_degrees(),
+            rr.to_degrees(),
+            rp.to_degrees()
+        );
         let e = est.eskf().expect("eskf");
         let fix = f.gnss.iter().min_by_key(|g| (g.t_ns - p.t_ns).abs());
         let herr = fix.map_or(f64::NAN, |g| {
@@ -233,6 +243,10 @@ fn trace() {
             pc[(0, 0)].sqrt(),
         );
         let gsf = e.yaw_estimator().yaw();
+        eprint!(
+            "bgz {:.3} ",
+            e.nominal().map_or(f64::NAN, |x| x.bg.z.to_degrees())
+        );
         eprint!(
             "B {:.0}mG typ {:.0}mG ",
             f.mag

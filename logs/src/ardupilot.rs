@@ -200,6 +200,7 @@ pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, Log
     if let Some(e) = &log.damage {
         notes.push(crate::damage_note(e));
     }
+    notes.extend(log.skipped_formats.iter().cloned());
 
     let mut params = BTreeMap::new();
     if let Some(t) = log.table("PARM") {

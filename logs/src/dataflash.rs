@@ -48,6 +48,9 @@ struct Format {
     /// Total message length, header included.
     len: usize,
     chars: Vec<u8>,
+    /// Whether `chars` describe `len` bytes; a message of a format that does not is stepped over
+    /// by its stated length and not decoded.
+    decodable: bool,
 }
 
 /// All kept rows of one message name.
@@ -112,6 +115,9 @@ pub(crate) struct DfLog {
     pub(crate) counts: BTreeMap<String, usize>,
     /// Where parsing stopped early (a cut tail, or any damage with `stop_at_damage`).
     pub(crate) damage: Option<LogError>,
+    /// Message types whose `FMT` length disagrees with its format string: framed by the stated
+    /// length, their rows skipped (one line each, for the import's notes).
+    pub(crate) skipped_formats: Vec<String>,
 }
 
 impl DfLog {
@@ -200,6 +206,7 @@ pub(crate) fn parse(
             name: "FMT".into(),
             len: FMT_LEN,
             chars: b"BBnNZ".to_vec(),
+            decodable: true,
         },
     );
     let file = Bytes::new(data, 0);
@@ -255,7 +262,16 @@ fn step(
     *log.counts.entry(fmt.name.clone()).or_default() += 1;
     if id == FMT_TYPE {
         let (new_id, new) = parse_fmt(msg, pos)?;
-        if keep.contains(new.name.as_str()) {
+        if !new.decodable {
+            log.skipped_formats.push(format!(
+                "{} (type {new_id}, FMT at byte {pos}): stated length {} does not match its \
+                 format {:?}; its messages were skipped",
+                new.name,
+                new.len,
+                String::from_utf8_lossy(&new.chars)
+            ));
+        }
+        if keep.contains(new.name.as_str()) && new.decodable {
             let labels = fmt_labels(msg)?;
             let table = log.tables.entry(new.name.clone()).or_default();
             // A redefinition with other labels after rows were kept would mix layouts: keep the
@@ -266,7 +282,8 @@ fn step(
         }
         formats.insert(new_id, new);
         return Ok(pos + len);
-    } else if keep.contains(fmt.name.as_str())
+    } else if fmt.decodable
+        && keep.contains(fmt.name.as_str())
         && let Some(table) = log.tables.get_mut(&fmt.name)
         && table.labels.len() == fmt.chars.len()
     {
@@ -303,22 +320,32 @@ fn parse_fmt(msg: Bytes<'_>, pos: usize) -> Result<(u8, Format), LogError> {
             )
         })?;
     }
-    if size != len {
-        return Err(LogError::corrupt(
-            pos,
-            format!(
-                "FMT of {name} (type {id}): length {len} but its format {:?} needs {size}",
-                String::from_utf8_lossy(&chars)
-            ),
-        ));
-    }
     if id == FMT_TYPE && len != FMT_LEN {
         return Err(LogError::corrupt(
             pos,
             "FMT redefines FMT with another length",
         ));
     }
-    Ok((id, Format { name, len, chars }))
+    if len < 3 {
+        return Err(LogError::corrupt(
+            pos,
+            format!("FMT of {name} (type {id}): length {len} is shorter than a message header"),
+        ));
+    }
+    // Some autopilot builds wrote an FMT whose length disagrees with its own format string
+    // (ArduPilot logs on Erle-Brain declare EKF5 as 28 bytes for a 40-byte format). The writer
+    // framed the messages by the stated length, so the log stays readable by it; the fields
+    // cannot be trusted, so those messages are not decoded.
+    let decodable = size == len;
+    Ok((
+        id,
+        Format {
+            name,
+            len,
+            chars,
+            decodable,
+        },
+    ))
 }
 
 fn fmt_labels(msg: Bytes<'_>) -> Result<Vec<String>, LogError> {

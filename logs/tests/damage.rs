@@ -211,3 +211,43 @@ fn cuts_of_the_shared_logs_are_clear_errors() {
         }
     }
 }
+
+/// An FMT whose stated length disagrees with its own format string (ArduPilot builds on
+/// Erle-Brain declare EKF5 as 28 bytes for a 40-byte format): its messages are framed by the
+/// stated length and skipped, with a note, and the rest of the log imports.
+#[test]
+fn an_fmt_whose_length_contradicts_its_format_is_skipped_with_a_note() {
+    let (mut df, _) = dataflash(0);
+    let mut ekf5 = vec![0xA3, 0x95, 128, 164, 28];
+    for (s, w) in [
+        ("EKF5", 4),
+        ("QBhhhcccCCfff", 16),
+        (
+            "TimeUS,NI,FIX,FIY,AFI,HAGL,offset,RI,meaRng,errHAGL,angErr,beaconPosX",
+            64,
+        ),
+    ] {
+        let mut b = s.as_bytes().to_vec();
+        b.resize(w, 0);
+        ekf5.extend(b);
+    }
+    df.extend(&ekf5);
+    for i in 0..4u32 {
+        df.extend([0xA3, 0x95, 164]);
+        df.extend([0x5Au8; 25]);
+        df.extend([0xA3, 0x95, 100]);
+        df.extend((1000 + 20 * i).to_le_bytes());
+        for v in [0.01f32, -0.02, 0.03, 0.1, -0.2, -9.8] {
+            df.extend(v.to_le_bytes());
+        }
+    }
+    let log = import(&df, &ImportOptions::default()).expect("imports");
+    assert_eq!(log.imu.len(), 4);
+    assert!(
+        log.notes
+            .iter()
+            .any(|n| n.contains("EKF5") && n.contains("28") && n.contains("skipped")),
+        "{:?}",
+        log.notes
+    );
+}
