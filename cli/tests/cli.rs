@@ -99,8 +99,9 @@ async fn cli_management_subcommands() {
         g.clone(),
         "--vehicle".into(),
         "cli-1".into(),
+        // Several health periods (1 s by default): one period failed once on a loaded CI machine.
         "--wait".into(),
-        "0.8".into(),
+        "3".into(),
         "--json".into(),
     ])
     .await;

@@ -246,3 +246,34 @@ fn a_cut_log_imports_with_a_note_and_a_corrupt_one_is_refused_with_its_byte_offs
     );
     assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
 }
+
+/// A ground station's MAVLink telemetry (`.tlog`, ArduPlane VTOL SITL at ~4 Hz): estimated end to
+/// end from horizontal GNSS velocity (`GPS_RAW_INT` has no vertical one), with the slow IMU and
+/// the assumed GNSS delay said on stderr and each refused input named by its stream.
+#[test]
+fn estimate_a_mavlink_telemetry_log() {
+    let Some(root) = uavnav_tests::shared_data("public_flight_logs") else {
+        return;
+    };
+    let tlog = root.join("ardupilot_vtol_sitl.tlog");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let poses = dir.path().join("poses.csv");
+    let out = run(&[
+        "estimate",
+        tlog.to_str().unwrap(),
+        "--out",
+        poses.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(0));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("IMU at 4.2 Hz (a telemetry stream)"), "{err}");
+    assert!(err.contains("GNSS delay not known"), "{err}");
+    // 4 Hz telemetry drops samples: gaps beyond the IMU limit are refused, by name.
+    assert!(err.contains("IMU sample at "), "{err}");
+    assert!(err.contains("fused IMU+GNSS"), "{err}");
+    let rows = rows(&poses);
+    assert!(rows.len() > 500, "{} poses", rows.len());
+    for r in &rows {
+        assert!(!r.contains("NaN") && !r.contains("inf"), "{r}");
+    }
+}

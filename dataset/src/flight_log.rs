@@ -1,4 +1,5 @@
-//! An autopilot's flight log (ArduPilot DataFlash `.BIN`, PX4 ULog `.ulg`) opened as a dataset.
+//! An autopilot's flight log (ArduPilot DataFlash `.BIN`, PX4 ULog `.ulg`, MAVLink
+//! telemetry `.tlog`) opened as a dataset.
 //!
 //! The log is imported whole by `uavnav-logs` (a few MB; the importer needs every message to
 //! derive the time base, filter the fixes and build the reference), then served like any other
@@ -20,7 +21,7 @@ use crate::merge::{EventSource, Merge};
 use crate::{ReadOptions, Reference};
 
 /// The extensions recognised without looking at the content (any case).
-pub const LOG_EXTENSIONS: [&str; 2] = ["bin", "ulg"];
+pub const LOG_EXTENSIONS: [&str; 3] = ["bin", "ulg", "tlog"];
 
 /// Whether `path` names a flight log by its extension.
 pub fn has_log_extension(path: &Path) -> bool {

@@ -2,7 +2,7 @@
 //!
 //! Streaming dataset I/O for uavnav: EuRoC/ASL folders (extended with `gnss0`) and MCAP
 //! recordings, read and written, and converters between them; autopilot flight logs (ArduPilot
-//! DataFlash `.BIN`, PX4 ULog `.ulg`) are read as datasets too. A flight's camera frames are never
+//! DataFlash `.BIN`, PX4 ULog `.ulg`, MAVLink telemetry `.tlog`) are read as datasets too. A flight's camera frames are never
 //! all in memory: events are read lazily and merged in time order; truth is read fully (small).
 //!
 //! Truth and reference are kept apart: [`Dataset::truth`] is ground truth (a simulator's, a
@@ -57,7 +57,8 @@ pub enum Format {
     Asl,
     /// An MCAP recording.
     Mcap,
-    /// An autopilot flight log (ArduPilot DataFlash `.BIN`, PX4 ULog `.ulg`), read only.
+    /// An autopilot flight log (ArduPilot DataFlash `.BIN`, PX4 ULog `.ulg`, MAVLink telemetry `.tlog`),
+    /// read only.
     Log,
 }
 
@@ -165,7 +166,7 @@ impl Dataset {
                         return Err(DatasetError::Unsupported {
                             path: path.to_owned(),
                             message: "not a folder (ASL), an .mcap file nor a flight log \
-                                      (ArduPilot .BIN, PX4 .ulg)"
+                                      (ArduPilot .BIN, PX4 .ulg, MAVLink .tlog)"
                                 .into(),
                         });
                     }

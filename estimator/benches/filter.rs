@@ -76,6 +76,7 @@ fn bench(c: &mut Criterion) {
         t_ns: x.t_ns,
         pos_ned_m: x.p + x.q * lever + Vector3::new(0.3, -0.2, 0.5),
         vel_ned_mps: Some(x.v + Vector3::new(0.02, 0.01, -0.03)),
+        vel_h_mps: Some((x.v + Vector3::new(0.02, 0.01, -0.03)).xy()),
         sigma_h_m: 1.58,
         sigma_v_m: 2.6,
         sigma_vel_mps: 0.05,

@@ -126,6 +126,7 @@ mod tests {
             t_ns: t,
             pos_ned_m: Vector3::zeros(),
             vel_ned_mps: Some(Vector3::zeros()),
+            vel_h_mps: Some(nalgebra::Vector2::zeros()),
             sigma_h_m: 1.0,
             sigma_v_m: 1.0,
             sigma_vel_mps: 0.1,

@@ -58,9 +58,8 @@ impl Initialiser {
         params: &EstimatorParams,
         gm_sigma_m: [f64; 3],
     ) -> Option<InitResult> {
-        // The alignment needs the receiver's velocity (a position-only fix waits for the next).
-        let v_fix = fix.vel_ned_mps?;
         let prev = self.prev_fix.replace(*fix);
+        let (v_fix, v_sigma) = init_velocity(fix, prev.as_ref())?;
         let (t_first, t_last) = (self.samples.front()?.0, self.samples.back()?.0);
         if ((t_last - t_first) as f64) < 0.8 * params.init_level_window_s * 1e9 {
             return None;
@@ -80,7 +79,9 @@ impl Initialiser {
             _ => Vector3::zeros(),
         };
         let speed_h = v_fix.xy().norm();
-        let yaw_aligned = params.course_heading && speed_h >= params.init_min_speed_mps;
+        // A course is a heading only when the speed stands well clear of its own noise.
+        let yaw_aligned =
+            params.course_heading && speed_h >= params.init_min_speed_mps.max(3.0 * v_sigma.x);
         let yaw = if yaw_aligned {
             v_fix.y.atan2(v_fix.x)
         } else {
@@ -117,7 +118,7 @@ impl Initialiser {
             // p̂ = z − C r ⇒ δp = −(e_gnss + n): position and GNSS error start anti-correlated.
             cov[(IP + k, IGM + k)] = -gm_sigma_m[k].powi(2);
             cov[(IGM + k, IP + k)] = -gm_sigma_m[k].powi(2);
-            cov[(IV + k, IV + k)] = fix.sigma_vel_mps.powi(2).max(1e-4) * 4.0;
+            cov[(IV + k, IV + k)] = v_sigma[k].powi(2);
             cov[(IBG + k, IBG + k)] = params.init_gyro_bias_sigma_radps.powi(2);
             cov[(IBA + k, IBA + k)] = params.init_accel_bias_sigma_mps2.powi(2);
         }
@@ -128,6 +129,42 @@ impl Initialiser {
             yaw_aligned,
         })
     }
+}
+
+/// σ of an unknown vertical velocity at the alignment, m/s (a receiver that gives ground speed and
+/// course only): a climb or descent of a small UAV.
+pub const UNKNOWN_VERTICAL_VELOCITY_SIGMA_MPS: f64 = 3.0;
+
+/// The velocity the alignment starts from and its 1-σ per axis (NED), m/s:
+/// * the receiver's 3-D velocity, σ twice its stated one (it is one sample);
+/// * its horizontal velocity only (ground speed and course, MAVLink `GPS_RAW_INT`): vertical 0
+///   with [`UNKNOWN_VERTICAL_VELOCITY_SIGMA_MPS`];
+/// * no velocity at all (a position-only source, ROS `NavSatFix`): the difference of this fix's
+///   position and the previous one's over the interval (0.1–2 s), σ from their position σ.
+///
+/// `None` when none applies (the first position-only fix): the alignment waits for the next.
+fn init_velocity(fix: &GnssMeas, prev: Option<&GnssMeas>) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    let s = fix.sigma_vel_mps.max(0.01) * 2.0;
+    if let Some(v) = fix.vel_ned_mps {
+        return Some((v, Vector3::repeat(s)));
+    }
+    if let Some(h) = fix.vel_h_mps {
+        return Some((
+            Vector3::new(h.x, h.y, 0.0),
+            Vector3::new(s, s, UNKNOWN_VERTICAL_VELOCITY_SIGMA_MPS),
+        ));
+    }
+    let p = prev?;
+    let dt_s = (fix.t_ns - p.t_ns) as f64 * 1e-9;
+    if !(0.1..=2.0).contains(&dt_s) {
+        return None;
+    }
+    let sh = fix.sigma_h_m.hypot(p.sigma_h_m) / dt_s;
+    let sv = fix.sigma_v_m.hypot(p.sigma_v_m) / dt_s;
+    Some((
+        (fix.pos_ned_m - p.pos_ned_m) / dt_s,
+        Vector3::new(sh, sh, sv),
+    ))
 }
 
 /// Sets the attitude block to diag(tilt², tilt², yaw²) and removes its correlations.
@@ -190,4 +227,77 @@ pub fn hold_yaw_unknown(cov: &mut Cov) {
     cov.row_mut(ITH + 2).fill(0.0);
     cov.column_mut(ITH + 2).fill(0.0);
     cov[(ITH + 2, ITH + 2)] = UNALIGNED_YAW_SIGMA_RAD.powi(2);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector2;
+
+    fn level_initialiser(t_ns: i64) -> Initialiser {
+        let mut init = Initialiser::default();
+        for k in 0..=100 {
+            init.add_imu(
+                t_ns - 1_000_000_000 + k * 10_000_000,
+                &Vector3::zeros(),
+                &Vector3::new(0.0, 0.0, -9.806_65),
+                1.0,
+            );
+        }
+        init
+    }
+
+    fn meas(t_ns: i64, north_m: f64) -> GnssMeas {
+        GnssMeas {
+            t_ns,
+            pos_ned_m: Vector3::new(north_m, 0.0, 0.0),
+            vel_ned_mps: None,
+            vel_h_mps: None,
+            sigma_h_m: 1.0,
+            sigma_v_m: 1.5,
+            sigma_vel_mps: f64::INFINITY,
+        }
+    }
+
+    fn try_at(init: &mut Initialiser, m: &GnssMeas) -> Option<InitResult> {
+        let g = Vector3::new(0.0, 0.0, 9.806_65);
+        init.try_init(
+            m,
+            &Vector3::zeros(),
+            &g,
+            &EstimatorParams::default(),
+            [1.0; 3],
+        )
+    }
+
+    #[test]
+    fn ground_speed_and_course_are_enough_to_start() {
+        let t = 10_000_000_000;
+        let mut init = level_initialiser(t);
+        let m = GnssMeas {
+            vel_h_mps: Some(Vector2::new(3.0, 4.0)),
+            sigma_vel_mps: 0.3,
+            ..meas(t, 0.0)
+        };
+        let r = try_at(&mut init, &m).expect("started");
+        assert!((r.x.v - Vector3::new(3.0, 4.0, 0.0)).norm() < 1e-9);
+        assert!((r.p[(IV + 2, IV + 2)].sqrt() - UNKNOWN_VERTICAL_VELOCITY_SIGMA_MPS).abs() < 1e-12);
+        assert!((r.p[(IV, IV)].sqrt() - 0.6).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_position_only_source_starts_from_two_fixes() {
+        let t = 10_000_000_000;
+        let mut init = level_initialiser(t);
+        assert!(
+            try_at(&mut init, &meas(t, 0.0)).is_none(),
+            "one fix has no velocity"
+        );
+        let mut init = level_initialiser(t + 500_000_000);
+        init.prev_fix = Some(meas(t, 0.0));
+        let r = try_at(&mut init, &meas(t + 500_000_000, 5.0)).expect("started");
+        assert!((r.x.v.x - 10.0).abs() < 1e-9, "{}", r.x.v);
+        // σ from the two positions over 0.5 s: √2 · 1 m / 0.5 s.
+        assert!((r.p[(IV, IV)].sqrt() - 2f64.sqrt() * 2.0).abs() < 1e-9);
+    }
 }

@@ -15,7 +15,7 @@ pub enum LogError {
     },
     /// The bytes are neither a DataFlash log nor a ULog file.
     #[error(
-        "not a flight log: the first bytes are neither a DataFlash message (A3 95) nor the ULog magic"
+        "not a flight log: the first bytes are neither a DataFlash message (A3 95), the ULog magic nor a MAVLink telemetry record"
     )]
     UnknownFormat,
     /// The input ends inside a header or a message.

@@ -9,6 +9,8 @@
 //! | `ardupilot` (private) | DataFlash messages → [`FlightLog`]: UNIX time from GPS week/time of week, GNSS filtering and sigmas, MSL → ellipsoid, EKF reference |
 //! | `ulog` (private) | PX4 ULog `.ulg` byte layer: header, definitions, data, appended data |
 //! | `px4` (private) | ULog topics → [`FlightLog`] (old and new GNSS layouts) |
+//! | `tlog` (private) | MAVLink telemetry `.tlog` byte layer: records, v1/v2 frames, checksums, resynchronisation |
+//! | `mavlink` (private) | MAVLink messages → [`FlightLog`] (what a ground station recorded) |
 //! | [`error`] | [`LogError`]: every decoding error names its byte offset |
 //!
 //! Entry points: [`import`] (bytes, format sniffed) and [`open`] (a path).
@@ -39,7 +41,9 @@
 mod ardupilot;
 mod dataflash;
 pub mod error;
+mod mavlink;
 mod px4;
+mod tlog;
 mod ulog;
 
 use std::collections::BTreeMap;
@@ -55,6 +59,8 @@ pub enum LogKind {
     ArduPilot,
     /// PX4 ULog `.ulg`.
     Px4,
+    /// MAVLink telemetry `.tlog`, as a ground station records it.
+    Mavlink,
 }
 
 /// What kind of vehicle the log says it is (firmware name, `MAV_TYPE`).
@@ -165,6 +171,8 @@ pub fn import(data: &[u8], options: &ImportOptions) -> Result<FlightLog, LogErro
         px4::import(data, options)
     } else if dataflash::sniff(data) {
         ardupilot::import(data, options)
+    } else if mavlink::sniff(data) {
+        mavlink::import(data, options)
     } else {
         Err(LogError::UnknownFormat)
     }?;

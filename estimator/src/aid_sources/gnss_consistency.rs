@@ -145,6 +145,7 @@ mod tests {
             t_ns: t_ms * 1_000_000,
             pos_ned_m: p,
             vel_ned_mps: Some(v),
+            vel_h_mps: Some(v.xy()),
             sigma_h_m: 0.5,
             sigma_v_m: 0.8,
             sigma_vel_mps: 0.2,

@@ -22,6 +22,10 @@ pub struct GnssMeas {
     /// Antenna velocity, NED, m/s, when the receiver gave all three components (fixes without
     /// velocity, or without its vertical component, are fused for position only).
     pub vel_ned_mps: Option<Vector3<f64>>,
+    /// Horizontal antenna velocity (north, east), m/s, whenever the receiver gives one, also
+    /// without a vertical component (ground speed and course): the yaw bank and the alignment
+    /// need no more.
+    pub vel_h_mps: Option<nalgebra::Vector2<f64>>,
     /// Reported 1-σ horizontal position, m.
     pub sigma_h_m: f64,
     /// Reported 1-σ vertical position, m.
@@ -37,6 +41,7 @@ impl GnssMeas {
             t_ns: fix.t_ns,
             pos_ned_m,
             vel_ned_mps: fix.velocity.and_then(|v| v.ned_mps()),
+            vel_h_mps: fix.velocity.map(|v| v.horizontal_mps()),
             sigma_h_m: fix.sigma_h_m,
             sigma_v_m: fix.sigma_v_m,
             sigma_vel_mps: fix.velocity.map_or(f64::INFINITY, |v| v.sigma_mps),
@@ -181,6 +186,7 @@ mod tests {
             t_ns: 0,
             pos_ned_m: Vector3::zeros(),
             vel_ned_mps: None,
+            vel_h_mps: None,
             sigma_h_m,
             sigma_v_m,
             sigma_vel_mps: 0.1,

@@ -2,7 +2,7 @@
 //! course for a fixed wing), its alignment from unknown, the emergency reset from the bank, and
 //! the magnetometer's fusion against the world magnetic model.
 
-use nalgebra::{Vector2, Vector3};
+use nalgebra::Vector3;
 use uavnav_core::magnetic::{MagneticField, MagneticModel, decimal_year};
 
 use super::Eskf;
@@ -35,9 +35,9 @@ const UNIX_2000_NS: i64 = 946_684_800_000_000_000;
 
 impl Eskf {
     pub(super) fn feed_yaw_estimator(&mut self, m: &GnssMeas) {
-        if let Some(v) = m.vel_ned_mps {
-            self.yaw_est
-                .fuse_velocity(m.t_ns, Vector2::new(v.x, v.y), m.sigma_vel_mps);
+        // The bank needs the horizontal velocity only (ground speed and course will do).
+        if let Some(v) = m.vel_h_mps {
+            self.yaw_est.fuse_velocity(m.t_ns, v, m.sigma_vel_mps);
         }
     }
 

@@ -1,5 +1,6 @@
 //! `uavnav convert SRC --out DST`: ASL folder ↔ MCAP recording (by the `.mcap` extension), a
-//! flight log (ArduPilot `.BIN`, PX4 `.ulg`) into either, and the output sink `simulate` shares.
+//! flight log (ArduPilot `.BIN`, PX4 `.ulg`, MAVLink `.tlog`) into either, and the output sink
+//! `simulate` shares.
 
 use std::path::{Path, PathBuf};
 
@@ -13,7 +14,8 @@ use crate::common::{CliError, CliResult};
 #[command(after_help = crate::EXIT_CODES)]
 pub struct Args {
     /// Source: an ASL folder (with `mav0/`), an `.mcap` recording, or a flight log (ArduPilot
-    /// DataFlash `.BIN`, PX4 ULog `.ulg`; also recognised by its first bytes). A log's autopilot
+    /// DataFlash `.BIN`, PX4 ULog `.ulg`, MAVLink telemetry `.tlog`; also recognised by its first
+    /// bytes). A log's autopilot
     /// estimate is written as a reference (ASL: state_groundtruth_estimate0 marked "NOT ground
     /// truth"; MCAP: the `reference` topic), never as truth.
     pub src: PathBuf,

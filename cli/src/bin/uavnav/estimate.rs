@@ -16,7 +16,7 @@ use crate::common::{CliError, CliResult};
 #[command(after_help = crate::EXIT_CODES)]
 pub struct Args {
     /// An ASL folder (with `mav0/`), an `.mcap` recording, or a flight log (ArduPilot DataFlash
-    /// `.BIN`, PX4 ULog `.ulg`).
+    /// `.BIN`, PX4 ULog `.ulg`, MAVLink telemetry `.tlog`).
     pub dataset: PathBuf,
     /// Filter profile: `eskf` (default) or `paper` (the paper's three EKFs).
     #[arg(long, default_value = "eskf", value_parser = parse_profile)]
@@ -149,6 +149,14 @@ pub fn run_dataset(
         // Counted only when the estimator accepts the input.
         let mut fed = out.fed;
         fed.count(&ev);
+        let what = match &ev {
+            SensorEvent::Imu(_) => "IMU sample",
+            SensorEvent::Gnss(_) => "GNSS fix",
+            SensorEvent::Mag(_) => "magnetometer sample",
+            SensorEvent::Baro(_) => "barometer sample",
+            SensorEvent::Camera(_) => "camera frame",
+        };
+        let t_ns = ev.t_ns();
         match runner.push_inline(ev) {
             Ok(poses) => {
                 out.fed = fed;
@@ -160,7 +168,7 @@ pub fn run_dataset(
             Err(e) => {
                 out.rejected += 1;
                 if out.rejected <= 5 {
-                    eprintln!("uavnav: input refused: {e}");
+                    eprintln!("uavnav: {what} at {t_ns} ns refused: {e}");
                 }
             }
         }

@@ -53,7 +53,7 @@ pub struct Args {
     /// Leave camera frames out.
     #[arg(long)]
     pub no_camera: bool,
-    /// Replay this recording (ASL folder, MCAP, or a flight log: ArduPilot `.BIN`, PX4 `.ulg`)
+    /// Replay this recording (ASL folder, MCAP, or a flight log: ArduPilot `.BIN`, PX4 `.ulg`, MAVLink `.tlog`)
     /// instead of the simulated smoke flight.
     #[arg(long)]
     pub recording: Option<PathBuf>,

@@ -51,9 +51,9 @@ enum Command {
     Demo(demo::Args),
     /// Simulate a flight from a scenario file into an ASL folder or an MCAP recording.
     Simulate(simulate::Args),
-    /// Convert a dataset between the ASL folder layout and MCAP (or a flight log .BIN/.ulg into either).
+    /// Convert a dataset between the ASL folder layout and MCAP (or a flight log .BIN/.ulg/.tlog into either).
     Convert(convert::Args),
-    /// Estimate poses offline from an ASL folder, an MCAP recording or a flight log (.BIN, .ulg).
+    /// Estimate poses offline from an ASL folder, an MCAP recording or a flight log (.BIN, .ulg, .tlog).
     Estimate(estimate::Args),
     /// Run the vision front end on consecutive frame pairs and write the egomotion per pair.
     Vision(vision::Args),

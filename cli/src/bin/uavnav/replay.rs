@@ -22,7 +22,7 @@ use crate::endpoint::{DEFAULT_URL, SecurityArgs, block_on, client_err, connect};
 #[command(after_help = crate::EXIT_CODES)]
 pub struct Args {
     /// An ASL folder, an `.mcap` dataset, a fleet recording made by `uavnav record`, or a flight
-    /// log (ArduPilot `.BIN`, PX4 `.ulg`; its derived configuration, GNSS delay included, is sent
+    /// log (ArduPilot `.BIN`, PX4 `.ulg`, MAVLink `.tlog`; its derived configuration, GNSS delay included, is sent
     /// first).
     pub dataset: PathBuf,
     /// Service URL (grpc://HOST:PORT, grpcs://HOST:PORT, zenoh, zenoh/tcp/HOST:PORT, zenoh/tls/HOST:PORT).
