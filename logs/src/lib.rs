@@ -211,6 +211,22 @@ pub(crate) fn damage_note(e: &LogError) -> String {
     }
 }
 
+/// The clock of a log from its boot → UNIX offsets (µs, one per message that pairs the two):
+/// UNIX with their median, else since boot with a note saying that `source` was missing.
+pub(crate) fn time_base(
+    offsets_us: &[f64],
+    source: &str,
+    notes: &mut Vec<String>,
+) -> (TimeBase, i64) {
+    match median(offsets_us) {
+        Some(us) => (TimeBase::Unix, (us.round() as i64).saturating_mul(1000)),
+        None => {
+            notes.push(format!("no {source}: times are since boot"));
+            (TimeBase::Boot, 0)
+        }
+    }
+}
+
 pub(crate) fn median(values: &[f64]) -> Option<f64> {
     let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
     if v.is_empty() {

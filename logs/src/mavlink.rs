@@ -28,7 +28,7 @@ use uavnav_core::{
 };
 
 use crate::tlog::{self, Fields, Frame};
-use crate::{FlightLog, ImportOptions, LogError, LogKind, TimeBase, VehicleKind};
+use crate::{FlightLog, ImportOptions, LogError, LogKind, VehicleKind};
 
 /// User-equivalent range error, m: HDOP × this is the horizontal σ when the receiver sends no
 /// accuracy (single-frequency code positioning).
@@ -138,13 +138,7 @@ pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, Log
             (unix > 0).then(|| unix as f64 - p.u32(8) * 1e3)
         })
         .collect();
-    let (time_base, offset_ns) = match crate::median(&diffs) {
-        Some(us) => (TimeBase::Unix, (us.round() as i64).saturating_mul(1000)),
-        None => {
-            notes.push("no SYSTEM_TIME with UNIX time: times are since boot".into());
-            (TimeBase::Boot, 0)
-        }
-    };
+    let (time_base, offset_ns) = crate::time_base(&diffs, "SYSTEM_TIME with UNIX time", &mut notes);
     let boot_us = |us: f64| (us as i64).saturating_mul(1000).saturating_add(offset_ns);
     let boot_ms = |ms: f64| boot_us(ms * 1e3);
 
@@ -425,6 +419,7 @@ fn reference<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::TimeBase;
     use crate::tlog::tests::record_v1;
 
     #[test]

@@ -21,7 +21,7 @@ use uavnav_core::geoid::egm96_undulation_m;
 use uavnav_core::{ImuConfig, ImuSample, Lla, TruthSample, VehicleConfig};
 
 use crate::ulog::{self, Topic};
-use crate::{FlightLog, ImportOptions, LogError, LogKind, TimeBase, VehicleKind, fix_type};
+use crate::{FlightLog, ImportOptions, LogError, LogKind, VehicleKind, fix_type};
 use uavnav_core::{BaroSample, GnssFix, GnssVelocity, MagSample};
 
 fn vec3(t: &Topic, r: &[u8], name: &str) -> Option<Vector3<f64>> {
@@ -63,13 +63,7 @@ pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, Log
                 .collect()
         })
         .unwrap_or_default();
-    let (time_base, offset_ns) = match crate::median(&diffs) {
-        Some(us) => (TimeBase::Unix, (us.round() as i64).saturating_mul(1000)),
-        None => {
-            notes.push("no GNSS UTC time: times are since boot".into());
-            (TimeBase::Boot, 0)
-        }
-    };
+    let (time_base, offset_ns) = crate::time_base(&diffs, "GNSS UTC time", &mut notes);
     // Saturating: a corrupt stamp must give an absurd time that later checks refuse, not a panic.
     let t_ns = |us: f64| (us as i64).saturating_mul(1000).saturating_add(offset_ns);
 
