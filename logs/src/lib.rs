@@ -81,6 +81,20 @@ pub enum VehicleKind {
     Sub,
 }
 
+impl VehicleKind {
+    /// The kind a MAVLink `MAV_TYPE` names (PX4's `MAV_TYPE` parameter, `HEARTBEAT.type`).
+    pub fn from_mav_type(mav_type: i64) -> Self {
+        match mav_type {
+            1 => VehicleKind::Plane,
+            2..=4 | 13..=15 => VehicleKind::Copter,
+            19..=22 => VehicleKind::Vtol,
+            10 | 11 => VehicleKind::Rover,
+            12 => VehicleKind::Sub,
+            _ => VehicleKind::Unknown,
+        }
+    }
+}
+
 /// The clock `t_ns` is on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum TimeBase {

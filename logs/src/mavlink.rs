@@ -121,14 +121,9 @@ pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, Log
     let ardupilot = heartbeat
         .as_ref()
         .is_some_and(|h| h.u8(5) == MAV_AUTOPILOT_ARDUPILOTMEGA);
-    let vehicle = match heartbeat.as_ref().map(|h| h.u8(4)) {
-        Some(1) => VehicleKind::Plane,
-        Some(2..=4 | 13..=15) => VehicleKind::Copter,
-        Some(19..=22) => VehicleKind::Vtol,
-        Some(10 | 11) => VehicleKind::Rover,
-        Some(12) => VehicleKind::Sub,
-        _ => VehicleKind::Unknown,
-    };
+    let vehicle = heartbeat.as_ref().map_or(VehicleKind::Unknown, |h| {
+        VehicleKind::from_mav_type(i64::from(h.u8(4)))
+    });
 
     // Boot → UNIX offset from SYSTEM_TIME.
     let diffs: Vec<f64> = of(SYSTEM_TIME)

@@ -225,14 +225,9 @@ pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, Log
             }
         },
     };
-    let vehicle = match params.get("MAV_TYPE").map(|v| *v as i64) {
-        Some(1) => VehicleKind::Plane,
-        Some(2..=4 | 13..=15) => VehicleKind::Copter,
-        Some(19..=22) => VehicleKind::Vtol,
-        Some(10 | 11) => VehicleKind::Rover,
-        Some(12) => VehicleKind::Sub,
-        _ => VehicleKind::Unknown,
-    };
+    let vehicle = params.get("MAV_TYPE").map_or(VehicleKind::Unknown, |v| {
+        VehicleKind::from_mav_type(*v as i64)
+    });
     let firmware = log
         .info
         .get("ver_sw_release")
