@@ -284,6 +284,29 @@ pub(crate) fn sensor_configs(
 }
 
 /// Median sample interval of increasing stamps, s.
+/// The configuration of a log that carries no IMU noise terms (PX4, MAVLink telemetry): the
+/// IMU's rate from its stamps (`default_rate_hz` with fewer than two) and in-flight MEMS values.
+pub(crate) fn mems_config(
+    imu: &[ImuSample],
+    default_rate_hz: f64,
+    gnss: &[GnssFix],
+    mag: &[MagSample],
+    baro: &[BaroSample],
+    delay_s: f64,
+) -> VehicleConfig {
+    let rate_hz = median_dt_s(imu.iter().map(|s| s.t_ns)).map_or(default_rate_hz, |dt| 1.0 / dt);
+    VehicleConfig {
+        imu: uavnav_core::ImuConfig {
+            rate_hz,
+            gyro_noise_density: 2.1e-3,
+            gyro_random_walk: 4e-5,
+            accel_noise_density: 3.5e-2,
+            accel_random_walk: 1e-3,
+        },
+        ..sensor_configs(gnss, mag, baro, delay_s)
+    }
+}
+
 pub(crate) fn median_dt_s(t_ns: impl Iterator<Item = i64>) -> Option<f64> {
     let t: Vec<i64> = t_ns.collect();
     let dts: Vec<f64> = t

@@ -23,8 +23,7 @@ use std::collections::BTreeMap;
 use nalgebra::{UnitQuaternion, Vector3};
 use uavnav_core::geoid::egm96_undulation_m;
 use uavnav_core::{
-    BaroSample, GnssFix, GnssVelocity, ImuConfig, ImuSample, Lla, LocalFrame, MagSample,
-    TruthSample, VehicleConfig,
+    BaroSample, GnssFix, GnssVelocity, ImuSample, Lla, LocalFrame, MagSample, TruthSample,
 };
 
 use crate::tlog::{self, Fields, Frame};
@@ -167,16 +166,7 @@ pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, Log
         ));
         DEFAULT_GNSS_DELAY_S
     });
-    let config = VehicleConfig {
-        imu: ImuConfig {
-            rate_hz,
-            gyro_noise_density: 2.1e-3,
-            gyro_random_walk: 4e-5,
-            accel_noise_density: 3.5e-2,
-            accel_random_walk: 1e-3,
-        },
-        ..crate::sensor_configs(&gnss, &mag, &baro, gnss_delay_s)
-    };
+    let config = crate::mems_config(&imu, 0.0, &gnss, &mag, &baro, gnss_delay_s);
     Ok(FlightLog {
         source: LogKind::Mavlink,
         vehicle,

@@ -18,7 +18,7 @@ use std::collections::BTreeMap;
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use uavnav_core::geoid::egm96_undulation_m;
-use uavnav_core::{ImuConfig, ImuSample, Lla, TruthSample, VehicleConfig};
+use uavnav_core::{ImuSample, Lla, TruthSample};
 
 use crate::ulog::{self, Topic};
 use crate::{FlightLog, ImportOptions, LogError, LogKind, VehicleKind, fix_type};
@@ -233,7 +233,7 @@ pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, Log
         .get("ver_sw_release")
         .map(|v| format!("PX4 ver_sw_release {v}"))
         .or_else(|| log.info.get("ver_sw").map(|v| format!("PX4 {v}")));
-    let config = config(&imu, &gnss, &mag, &baro, gnss_delay_s);
+    let config = crate::mems_config(&imu, 250.0, &gnss, &mag, &baro, gnss_delay_s);
 
     Ok(FlightLog {
         source: LogKind::Px4,
@@ -328,25 +328,4 @@ fn reference(log: &ulog::ULog, t_ns: &dyn Fn(f64) -> i64) -> (Vec<TruthSample>, 
         });
     }
     (out, origin)
-}
-
-/// PX4 logs no process-noise densities in its IMU terms; in-flight MEMS values are suggested.
-fn config(
-    imu: &[ImuSample],
-    gnss: &[GnssFix],
-    mag: &[MagSample],
-    baro: &[BaroSample],
-    delay_s: f64,
-) -> VehicleConfig {
-    let rate_hz = crate::median_dt_s(imu.iter().map(|s| s.t_ns)).map_or(250.0, |dt| 1.0 / dt);
-    VehicleConfig {
-        imu: ImuConfig {
-            rate_hz,
-            gyro_noise_density: 2.1e-3,
-            gyro_random_walk: 4e-5,
-            accel_noise_density: 3.5e-2,
-            accel_random_walk: 1e-3,
-        },
-        ..crate::sensor_configs(gnss, mag, baro, delay_s)
-    }
 }
