@@ -4,8 +4,10 @@
 /// (`uavnav_core::VehicleConfig`); these are the filter's own choices.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EstimatorParams {
-    /// How far the fusion horizon trails the newest IMU sample, ns. Must exceed the camera latency
-    /// plus one frame interval for vision to be fused at its own time (PX4 EKF2 `delay_max`).
+    /// How far the fusion horizon trails the newest IMU sample, ns, beyond the GNSS delay (which
+    /// the `eskf` adds: a delayed fix arrives that much after its validity time). Must exceed the
+    /// camera latency plus one frame interval for vision to be fused at its own time (PX4 EKF2
+    /// `delay_max`).
     pub fusion_delay_ns: i64,
     /// Covariance prediction period, s: the nominal state is integrated at every IMU sample, the
     /// covariance over accumulated intervals of about this length (PX4 `FILTER_UPDATE_PERIOD`).

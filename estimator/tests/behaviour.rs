@@ -520,3 +520,35 @@ fn clipped_imu_samples_are_taken_counted_and_widen_the_velocity_sigma() {
         a.sigma_vel_mps
     );
 }
+
+/// A receiver whose fixes are valid `delay` before their stamps (ArduPilot's default
+/// `EK3_GPS_DELAY` is 220 ms) and reach the filter in stamp order with the IMU: every fix valid
+/// after the first IMU sample is fused at its validity time, none dropped as late, and the
+/// vehicle stays put.
+#[test]
+fn gnss_delayed_beyond_the_fusion_delay_is_fused_not_dropped() {
+    for delay_ns in [0, 220_000_000, 450_000_000] {
+        let (mut cfg, origin, imu, gnss, _) = static_data(30.0, 3);
+        if let Some(g) = cfg.gnss.as_mut() {
+            g.delay_ns = delay_ns;
+        }
+        let mut est = Estimator::new(&cfg, EstimatorParams::default(), Some(origin));
+        let out = feed(&mut est, &imu, &gnss);
+        let last = out.last().expect("initialised");
+        // Only fixes valid before the first IMU sample have no place in the filter's history.
+        let before_imu = gnss
+            .iter()
+            .filter(|g| g.t_ns - delay_ns < imu[0].t_ns)
+            .count() as u64;
+        assert!(
+            last.health.late_dropped <= before_imu,
+            "delay {delay_ns} ns: {} fixes dropped as late",
+            last.health.late_dropped
+        );
+        assert!(
+            last.pos_ned_m.norm() < 2.0,
+            "delay {delay_ns} ns: drifted to {:?}",
+            last.pos_ned_m
+        );
+    }
+}

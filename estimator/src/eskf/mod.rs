@@ -94,6 +94,9 @@ pub struct Eskf {
     vision: VisionSource,
     out: OutputPredictor,
     late_dropped: u64,
+    /// How far the fusion horizon trails the newest IMU sample, ns: `fusion_delay_ns` plus the
+    /// GNSS delay (see [`horizon_lag_ns`]).
+    horizon_lag_ns: i64,
     corrected: bool,
     lla: Option<crate::output::LlaLinearizer>,
 }
@@ -103,6 +106,17 @@ pub struct Eskf {
 pub const CLIP_ACCEL_SIGMA_MPS2: f64 = 10.0;
 /// 1-σ of the rate a clipped gyro axis may have missed, rad/s.
 pub const CLIP_GYRO_SIGMA_RADPS: f64 = 1.0;
+
+/// How far the fusion horizon trails the newest IMU sample, ns: `fusion_delay_ns` (the arrival
+/// lateness the service allows any measurement) plus the GNSS delay. A fix stamped `t` was valid
+/// at `t − delay` and is fused there, yet it arrives only once the IMU has reached about `t`: with
+/// a horizon of `fusion_delay_ns` alone, any delay above it made every such fix late. ArduPilot's
+/// default `EK3_GPS_DELAY` is 220 ms against our 200 ms, and a real copter log lost its fixes in
+/// runs of 3–7 s that way, dropped as late (counted, not refused) while the yaw bank saw gaps.
+pub fn horizon_lag_ns(config: &VehicleConfig, params: &EstimatorParams) -> i64 {
+    let gnss_delay_ns = config.gnss.map_or(0, |g| g.delay_ns.max(0));
+    params.fusion_delay_ns.saturating_add(gnss_delay_ns)
+}
 
 /// Whether the interval `a`–`b` has a clipped accelerometer / gyro axis: at or beyond the
 /// configured clip level at `b`, or the same non-small reading repeated exactly (a saturated
@@ -185,6 +199,7 @@ impl Eskf {
             vision: VisionSource::default(),
             out: OutputPredictor::new(),
             late_dropped: 0,
+            horizon_lag_ns: horizon_lag_ns(config, &params),
             corrected: false,
             lla: None,
             params,
@@ -193,6 +208,11 @@ impl Eskf {
             s.set_frame(o);
         }
         s
+    }
+
+    /// How far the fusion horizon trails the newest IMU sample, ns.
+    pub fn horizon_lag_ns(&self) -> i64 {
+        self.horizon_lag_ns
     }
 
     /// Back to the state right after `new` (same configuration and origin): the filter is
@@ -327,7 +347,7 @@ impl Eskf {
             );
         }
         self.corrected = false;
-        let target = s.t_ns - self.params.fusion_delay_ns;
+        let target = s.t_ns - self.horizon_lag_ns;
         while self.imu.len() >= 2 && self.imu[1].t_ns <= target {
             self.step();
         }

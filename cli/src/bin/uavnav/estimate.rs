@@ -214,10 +214,12 @@ pub fn run(args: Args) -> CliResult {
         eprintln!("uavnav: {}: {note}", args.dataset.display());
     }
     eprintln!(
-        "uavnav: {} poses in {:.2} s ({} inputs refused; fused {}) -> {}",
+        "uavnav: {} poses in {:.2} s ({} inputs refused, {} dropped behind the fusion horizon; \
+         fused {}) -> {}",
         out.poses.len(),
         started.elapsed().as_secs_f64(),
         out.rejected,
+        out.poses.last().map_or(0, |p| p.health.late_dropped),
         crate::estimate_report::sources_label(&out),
         args.out.display()
     );
