@@ -56,6 +56,15 @@ pub struct YawEstimatorParams {
     /// than that σ, ns: at the first acceleration one hypothesis can win before its own yaw has
     /// settled (a 45° error with a 1° σ was seen on the simulated multirotor).
     pub converged_hold_ns: i64,
+    /// 1-σ of the horizontal specific-force error that persists over many GNSS intervals, m/s²:
+    /// a tilt error (1° is 0.17 m/s²), the accelerometer bias, vibration rectification. The models
+    /// treat their specific-force noise as white, so their yaw σ shrinks as updates accumulate;
+    /// a persistent error of `b` against horizontal accelerations of RMS `a` turns the heading by
+    /// up to `atan(b / a)` whatever the number of updates (see
+    /// [`YawEstimator::observability_sigma_rad`]).
+    pub persistent_accel_sigma_mps2: f64,
+    /// Time constant of the RMS horizontal acceleration behind that bound, s.
+    pub accel_rms_window_s: f64,
 }
 
 impl Default for YawEstimatorParams {
@@ -67,6 +76,8 @@ impl Default for YawEstimatorParams {
             tilt_gain: 0.2,
             converged_sigma_rad: 15f64.to_radians(),
             converged_hold_ns: 2_000_000_000,
+            persistent_accel_sigma_mps2: 0.1,
+            accel_rms_window_s: 10.0,
         }
     }
 }
@@ -99,6 +110,11 @@ pub struct YawEstimator {
     /// steady.
     steady_since: Option<(i64, f64)>,
     last_t_ns: i64,
+    /// Horizontal specific force (NED, leading model) integrated since the last GNSS velocity,
+    /// m/s, and the time it covers, s.
+    f_h_int: (Vector2<f64>, f64),
+    /// Low-passed mean square of the horizontal specific force over GNSS intervals, m²/s⁴.
+    accel_ms: Option<f64>,
 }
 
 impl Default for YawEstimator {
@@ -138,6 +154,8 @@ impl YawEstimator {
             manoeuvre_mps2s: 0.0,
             steady_since: None,
             last_t_ns: i64::MIN,
+            f_h_int: (Vector2::zeros(), 0.0),
+            accel_ms: None,
         }
     }
 
@@ -170,7 +188,8 @@ impl YawEstimator {
         };
         let qa = self.params.accel_sigma_mps2.powi(2) * dt_s * dt_s;
         let qy = self.params.yaw_rate_sigma_radps.powi(2) * dt_s;
-        for m in &mut self.models {
+        let lead = self.leading();
+        for (k, m) in self.models.iter_mut().enumerate() {
             let mut w = *gyro;
             if gain > 0.0 && f_norm > 1.0 {
                 let f_exp_b = m.q.inverse_transform_vector(&f_exp_nav);
@@ -181,6 +200,10 @@ impl YawEstimator {
             let f_nav = m.q.transform_vector(accel);
             let dv = Vector2::new(f_nav.x, f_nav.y) * dt_s;
             m.v += dv;
+            if k == lead {
+                self.f_h_int.0 += dv;
+                self.f_h_int.1 += dt_s;
+            }
             // F = [[1,0,−a_E dt],[0,1,a_N dt],[0,0,1]]
             let (c0, c1) = (-dv.y, dv.x);
             let p = m.p;
@@ -222,6 +245,7 @@ impl YawEstimator {
             }
         }
         self.last_vel = Some((t_ns, v));
+        self.track_accel_rms(after_gap);
         if !self.started {
             self.start(v, sigma);
             return;
@@ -287,6 +311,42 @@ impl YawEstimator {
         };
     }
 
+    /// The model with the largest weight.
+    fn leading(&self) -> usize {
+        let mut best = 0;
+        for (k, m) in self.models.iter().enumerate() {
+            if m.weight > self.models[best].weight {
+                best = k;
+            }
+        }
+        best
+    }
+
+    /// Folds the mean horizontal specific force since the last GNSS velocity into its low-passed
+    /// mean square (none across a gap).
+    fn track_accel_rms(&mut self, after_gap: bool) {
+        let (sum, dt) = std::mem::replace(&mut self.f_h_int, (Vector2::zeros(), 0.0));
+        if after_gap || dt <= 0.0 {
+            return;
+        }
+        let a2 = (sum / dt).norm_squared();
+        let alpha = (dt / self.params.accel_rms_window_s).min(1.0);
+        let ms = self.accel_ms.get_or_insert(a2);
+        *ms += (a2 - *ms) * alpha;
+    }
+
+    /// The heading error a persistent horizontal specific-force error can hide, rad:
+    /// `atan(b / a_rms)`, with `b` = `persistent_accel_sigma_mps2` and `a_rms` the recent RMS
+    /// horizontal specific force. A hovering copter (a_rms 0.3 m/s²) cannot know its heading better
+    /// than ~18° this way, however many fixes agree; a turning plane (a few m/s²) to 1–2°. π/2
+    /// before any interval was seen.
+    pub fn observability_sigma_rad(&self) -> f64 {
+        let b = self.params.persistent_accel_sigma_mps2;
+        self.accel_ms.map_or(std::f64::consts::FRAC_PI_2, |ms| {
+            b.atan2(ms.max(0.0).sqrt())
+        })
+    }
+
     fn start(&mut self, v: Vector2<f64>, sigma: f64) {
         let f = if self.f_count > 0 {
             self.f_mean / self.f_count as f64
@@ -349,6 +409,14 @@ impl YawEstimator {
         }
         self.yaw()
             .filter(|&(_, s)| s < self.params.converged_sigma_rad)
+    }
+
+    /// The σ a heading seen only through the GNSS velocity can honestly claim, rad: the converged
+    /// bank's σ combined with what the recent accelerations cannot tell
+    /// ([`Self::observability_sigma_rad`]). `None` while the bank has not converged.
+    pub fn honest_sigma_rad(&self) -> Option<f64> {
+        self.converged_yaw()
+            .map(|(_, s)| s.hypot(self.observability_sigma_rad()))
     }
 
     /// The models' weights (diagnostics).
@@ -420,6 +488,37 @@ mod tests {
         assert_eq!(e.weights(), before, "a fix after a gap weighs nothing");
         assert!(e.models.iter().all(|m| m.v == Vector2::new(1.0, 2.0)));
         assert!(e.converged_yaw().is_none(), "convergence is earned anew");
+    }
+
+    #[test]
+    fn the_honest_sigma_follows_how_hard_the_vehicle_accelerates() {
+        // Sideways at 1.5 m/s² peak (RMS ~1.06): a 0.1 m/s² persistent error hides ~5.4°.
+        let e = fly(0.3);
+        let obs = e.observability_sigma_rad().to_degrees();
+        assert!((4.0..7.0).contains(&obs), "{obs}");
+        let (_, model) = e.converged_yaw().expect("converged");
+        let honest = e.honest_sigma_rad().expect("converged");
+        assert!(
+            honest >= model && honest >= obs.to_radians(),
+            "{honest} {model}"
+        );
+        // Then a hover with 0.1 m/s² of corrections: the bound widens past 25°.
+        let mut e = e;
+        let q = UnitQuaternion::from_euler_angles(0.0, 0.0, 0.3);
+        let mut v = Vector2::zeros();
+        for k in 0..4000 {
+            let t = 60.0 + k as f64 * 0.01;
+            let a_b = Vector3::new(0.1 * (TAU * t / 4.0).sin(), 0.0, 0.0);
+            let a_n = q.transform_vector(&a_b);
+            v += Vector2::new(a_n.x, a_n.y) * 0.01;
+            let f_b = a_b - q.inverse_transform_vector(&Vector3::new(0.0, 0.0, 9.80665));
+            e.predict(&Vector3::zeros(), &f_b, 0.01);
+            if k % 20 == 0 {
+                e.fuse_velocity((t * 1e9) as i64, v, 0.2);
+            }
+        }
+        let obs = e.observability_sigma_rad().to_degrees();
+        assert!(obs > 25.0, "{obs}");
     }
 
     #[test]

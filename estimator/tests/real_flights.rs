@@ -111,9 +111,10 @@ fn copter_218_without_magnetometer() {
         return;
     };
     assert_eq!(s.bad_sigma_rows, 0, "{s}");
-    // Met: roll/pitch (1.35/1.01°), horizontal (0.54 m), never confidently wrong (100 % within
+    // Met: roll/pitch (1.35/1.01°), horizontal (0.53 m), never confidently wrong (100 % within
     // 3σ; 55 % before the yaw σ was floored at the yaw bank's spread). Not yet: yaw within 10°
-    // (11.2° RMSE against the autopilot's compass heading, which has its own ~4° error).
+    // (12.7° RMSE against the autopilot's compass heading, which has its own ~4° error; 11.2°
+    // before the floor also covered what hover accelerations cannot tell).
     assert!(s.rmse_deg[0] <= 1.5 && s.rmse_deg[1] <= 1.5, "{s}");
     assert!(s.horizontal_rmse_m <= 1.5, "{s}");
     assert!(s.yaw_within_3sigma >= 0.95, "{s}");
@@ -256,7 +257,8 @@ fn trace() {
             e.mag_source().typical_strength_t() * 1e7,
         );
         eprintln!(
-            "t {:6.1} yaw {:7.1} ref {:7.1} sig {:5.1} src {:?} mag fused {} rej {} dist {} tr {:.2} gsf {:?} resets {} vel tr {:.2} speed {:.1}",
+            "obs {:4.1} t {:6.1} yaw {:7.1} ref {:7.1} sig {:5.1} src {:?} mag fused {} rej {} dist {} tr {:.2} gsf {:?} resets {} vel tr {:.2} speed {:.1}",
+            e.yaw_estimator().observability_sigma_rad().to_degrees(),
             (p.t_ns - t0) as f64 * 1e-9,
             p.euler_rad.z.to_degrees(),
             ry.to_degrees(),

@@ -80,7 +80,7 @@ impl Eskf {
         let velocity_only = self.lever_b.norm() < 0.05 && self.body_from_cam.is_none();
         if !mag_active
             && velocity_only
-            && let Some((_, sigma)) = gsf
+            && let Some(sigma) = self.yaw_est.honest_sigma_rad()
         {
             self.floor_yaw_sigma(sigma);
         }
