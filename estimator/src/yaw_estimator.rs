@@ -115,6 +115,8 @@ pub struct YawEstimator {
     f_h_int: (Vector2<f64>, f64),
     /// Low-passed mean square of the horizontal specific force over GNSS intervals, m²/s⁴.
     accel_ms: Option<f64>,
+    /// The model with the largest weight (weights change only at GNSS velocities).
+    lead: usize,
 }
 
 impl Default for YawEstimator {
@@ -156,6 +158,7 @@ impl YawEstimator {
             last_t_ns: i64::MIN,
             f_h_int: (Vector2::zeros(), 0.0),
             accel_ms: None,
+            lead: 0,
         }
     }
 
@@ -188,7 +191,7 @@ impl YawEstimator {
         };
         let qa = self.params.accel_sigma_mps2.powi(2) * dt_s * dt_s;
         let qy = self.params.yaw_rate_sigma_radps.powi(2) * dt_s;
-        let lead = self.leading();
+        let lead = self.lead;
         for (k, m) in self.models.iter_mut().enumerate() {
             let mut w = *gyro;
             if gain > 0.0 && f_norm > 1.0 {
@@ -300,6 +303,7 @@ impl YawEstimator {
         for m in &mut self.models {
             m.weight /= sum;
         }
+        self.lead = self.leading();
         self.last_t_ns = t_ns;
         let thr = self.params.converged_sigma_rad;
         self.steady_since = match (self.yaw(), self.steady_since) {

@@ -210,11 +210,6 @@ impl Eskf {
         s
     }
 
-    /// How far the fusion horizon trails the newest IMU sample, ns.
-    pub fn horizon_lag_ns(&self) -> i64 {
-        self.horizon_lag_ns
-    }
-
     /// Back to the state right after `new` (same configuration and origin): the filter is
     /// rebuilt, so no field can be forgotten.
     pub fn reset(&mut self) {
