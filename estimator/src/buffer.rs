@@ -48,21 +48,54 @@ impl Event {
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct DelayBuffer {
     events: Vec<Event>,
+    /// How many of `events` are boxed egomotions (they hold [`Egomotion`]'s bytes besides).
+    egomotions: usize,
 }
 
-/// Bound on queued events (a stalled IMU must not grow memory without limit).
-pub const MAX_EVENTS: usize = 4096;
+/// Bound on queued events: a stalled IMU, or a stream whose aiding sensors run ahead of it, must
+/// not grow memory without limit. A second of horizon at the fastest rates seen on real vehicles
+/// (magnetometer 100 Hz, barometer 50 Hz, GNSS 10 Hz, camera 30 Hz with its clones) queues about
+/// 220 events. A power of two, so that the vector's doubling never reserves beyond it.
+pub const MAX_EVENTS: usize = 512;
+
+/// Bound on the IMU samples a filter keeps behind its newest one (the eskf's history from its
+/// fusion horizon, the paper profile's attitude history): at 1 kHz, two seconds. Beyond it the
+/// horizon is pushed forward, and measurements that then arrive behind it are dropped as late
+/// (counted): stamps crowded closer than the configured rate must not grow memory. A power of two
+/// (see [`MAX_EVENTS`]); 56 bytes each.
+pub const MAX_IMU_HISTORY: usize = 2048;
+
+/// Bound on queued egomotions among [`MAX_EVENTS`] (each boxed, about 0.6 kB): two seconds of a
+/// 30 Hz camera.
+pub const MAX_EGOMOTIONS: usize = 64;
+
+/// The most bytes a [`DelayBuffer`] holds: its vector at [`MAX_EVENTS`] and [`MAX_EGOMOTIONS`]
+/// boxed egomotions (the service's per-vehicle memory bound counts on it).
+pub const MAX_BYTES: usize =
+    MAX_EVENTS * size_of::<Event>() + MAX_EGOMOTIONS * size_of::<Egomotion>();
+
+/// The most bytes a filter's delayed buffers hold: the IMU history at [`MAX_IMU_HISTORY`] and the
+/// event buffer at [`MAX_BYTES`] (`Estimator::buffered_bytes` reports the current figure).
+pub const MAX_BUFFERED_BYTES: usize =
+    MAX_IMU_HISTORY * size_of::<uavnav_core::ImuSample>() + MAX_BYTES;
 
 impl DelayBuffer {
     /// Inserts an event in time order. Returns false (event dropped) when full.
     pub fn push(&mut self, e: Event) -> bool {
-        if self.events.len() >= MAX_EVENTS {
+        let ego = matches!(e, Event::Ego(_));
+        if self.events.len() >= MAX_EVENTS || (ego && self.egomotions >= MAX_EGOMOTIONS) {
             return false;
         }
+        self.egomotions += usize::from(ego);
         let key = (e.t_ns(), e.rank());
         let idx = self.events.partition_point(|x| (x.t_ns(), x.rank()) <= key);
         self.events.insert(idx, e);
         true
+    }
+
+    /// Bytes held: the vector's reservation and the boxed egomotions.
+    pub fn bytes(&self) -> usize {
+        self.events.capacity() * size_of::<Event>() + self.egomotions * size_of::<Egomotion>()
     }
 
     /// Time of the earliest event.
@@ -73,7 +106,9 @@ impl DelayBuffer {
     /// Removes and returns the earliest event if its time is `<= t_ns`.
     pub fn pop_until(&mut self, t_ns: i64) -> Option<Event> {
         if self.peek_t_ns().is_some_and(|t| t <= t_ns) {
-            Some(self.events.remove(0))
+            let e = self.events.remove(0);
+            self.egomotions -= usize::from(matches!(e, Event::Ego(_)));
+            Some(e)
         } else {
             None
         }
@@ -112,7 +147,9 @@ impl DelayBuffer {
 
     /// Drops everything.
     pub fn clear(&mut self) {
-        self.events.clear();
+        let Self { events, egomotions } = self;
+        events.clear();
+        *egomotions = 0;
     }
 }
 
@@ -146,5 +183,36 @@ mod tests {
         }
         assert_eq!(out, vec![(10, 0), (10, 0), (10, 3), (20, 0)]);
         assert_eq!(b.len(), 1);
+    }
+
+    #[test]
+    fn a_flood_is_refused_at_the_byte_bound() {
+        let ego = |t: i64| {
+            Event::Ego(Box::new(Egomotion {
+                t0_ns: t - 1,
+                t1_ns: t,
+                cam1_from_cam0: nalgebra::UnitQuaternion::identity(),
+                t_dir_cam1: None,
+                t_cam1_m: None,
+                rot_cov: nalgebra::Matrix3::identity(),
+                t_cov: nalgebra::Matrix3::identity(),
+                joint_cov: nalgebra::Matrix6::identity(),
+                tracked: 0,
+                inliers: 0,
+                quality: 1.0,
+                solver: uavnav_core::EgomotionSolver::RotationOnly,
+            }))
+        };
+        let mut b = DelayBuffer::default();
+        let taken_egos = (0..1000).filter(|&t| b.push(ego(t))).count();
+        assert_eq!(taken_egos, MAX_EGOMOTIONS);
+        let taken = (0..10_000).filter(|&t| b.push(g(t))).count();
+        assert_eq!(taken + taken_egos, MAX_EVENTS);
+        assert!(b.bytes() <= MAX_BYTES, "{} > {MAX_BYTES}", b.bytes());
+        // Draining gives the egomotion slots back.
+        while b.pop_until(i64::MAX).is_some() {}
+        assert!(b.push(ego(5)));
+        b.clear();
+        assert_eq!(b.egomotions, 0);
     }
 }

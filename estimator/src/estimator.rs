@@ -246,6 +246,15 @@ impl Estimator {
         }
     }
 
+    /// Bytes held by the filter's delayed buffers (IMU history, pending measurements): at most
+    /// [`crate::buffer::MAX_BUFFERED_BYTES`], whatever the input.
+    pub fn buffered_bytes(&self) -> usize {
+        match &self.profile {
+            Profile::Eskf(e) => e.buffered_bytes(),
+            Profile::Paper(p) => p.buffered_bytes(),
+        }
+    }
+
     /// Current health, the full snapshot (every output carries its summary, `PoseHealth`).
     pub fn health(&self) -> Health {
         let mut h = match &self.profile {

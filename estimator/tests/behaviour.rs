@@ -552,3 +552,45 @@ fn gnss_delayed_beyond_the_fusion_delay_is_fused_not_dropped() {
         );
     }
 }
+
+#[test]
+fn crowded_stamps_and_floods_stay_within_the_buffer_bound() {
+    use uavnav_estimator::buffer::MAX_BUFFERED_BYTES;
+    for profile in [FilterProfile::Eskf, FilterProfile::Paper] {
+        let (mut cfg, origin, imu, gnss, _) = static_data(10.0, 5);
+        cfg.profile = profile;
+        let mut est = Estimator::new(&cfg, EstimatorParams::default(), Some(origin));
+        feed(&mut est, &imu, &gnss);
+        let t_end = imu.last().unwrap().t_ns;
+        // 20,000 IMU samples 1 µs apart (20 ms of stamps, far denser than the configured rate),
+        // and GNSS fixes stamped ahead of the IMU, faster than the horizon can fuse them.
+        let last = *imu.last().unwrap();
+        for i in 1..=20_000_i64 {
+            let s = ImuSample {
+                t_ns: t_end + i * 1_000,
+                ..last
+            };
+            est.push_imu(&s).unwrap();
+        }
+        let fix = *gnss.last().unwrap();
+        for i in 1..=10_000_i64 {
+            let f = GnssFix {
+                t_ns: t_end + 20_000_000 + i * 1_000,
+                ..fix
+            };
+            est.push_gnss(&f).unwrap();
+        }
+        assert!(
+            est.buffered_bytes() <= MAX_BUFFERED_BYTES,
+            "{profile:?}: {} bytes buffered, bound {MAX_BUFFERED_BYTES}",
+            est.buffered_bytes()
+        );
+        // The filter is still usable: time moves on and poses come out.
+        let t = t_end + 100_000_000;
+        let out = est
+            .push_imu(&ImuSample { t_ns: t, ..last })
+            .unwrap()
+            .expect("a pose after the flood");
+        assert!(out.pos_ned_m.iter().all(|v| v.is_finite()));
+    }
+}

@@ -28,10 +28,12 @@ use crate::config::Config;
 pub const BASE_BYTES: u64 = 64 << 20;
 
 /// One vehicle at its largest without camera: actor, queues' fixed parts, reorder window (its
-/// capacity), latency memory, the estimator with its IMU history and delayed-fusion buffer, the
-/// last pose batch and health report. Measured 38–44 kB per vehicle streaming IMU + GNSS (2,000
-/// vehicles), rounded up with room for the buffers that grow to their caps under disorder.
-pub const VEHICLE_BYTES: u64 = 256 << 10;
+/// capacity), latency memory, the estimator, the last pose batch and health report (measured
+/// 38–44 kB per vehicle streaming IMU + GNSS, 2,000 vehicles; rounded up to 64 KiB), plus the
+/// estimator's delayed buffers at their caps (IMU history and pending measurements, which crowded
+/// stamps or aiding data ahead of the IMU fill: `uavnav_estimator::buffer::MAX_BUFFERED_BYTES`,
+/// about 210 kB).
+pub const VEHICLE_BYTES: u64 = (64 << 10) + uavnav_estimator::buffer::MAX_BUFFERED_BYTES as u64;
 
 /// Vision front end memory per configured camera pixel (image pyramids of two frames, gradients,
 /// tracks). Measured about 4.7 bytes per pixel (a 64 Mi pixel camera held +300 MB).

@@ -218,8 +218,9 @@ pub fn write_camera(c: &CameraConfig) -> String {
     )
 }
 
-/// Longest GNSS delay accepted, s: autopilots report 0.1–0.5 s; seconds mean a wrong unit.
-pub const MAX_GNSS_DELAY_S: f64 = 5.0;
+/// Longest GNSS delay accepted, s: autopilots report 0.1–0.5 s; longer means a wrong unit (the
+/// service's bound, which keeps the estimator's IMU history within its memory bound).
+pub const MAX_GNSS_DELAY_S: f64 = 1.0;
 
 /// The GNSS receiver from `gnss0/sensor.yaml` (lever arm = `T_BS` translation; optional `delay_s`,
 /// how long after its validity a fix is stamped, default 0).

@@ -26,7 +26,7 @@ use crate::aid_sources::gnss_pos::{
 use crate::aid_sources::gnss_vel::GnssVelSource;
 use crate::aid_sources::mag_heading::MagHeadingSource;
 use crate::aid_sources::vision::{VisionSource, VisionUse};
-use crate::buffer::{DelayBuffer, Event};
+use crate::buffer::{DelayBuffer, Event, MAX_IMU_HISTORY};
 use crate::init::{Initialiser, hold_yaw_unknown};
 use crate::output::PoseOutput;
 use crate::output_predictor::{OutputPredictor, mean_of};
@@ -303,6 +303,11 @@ impl Eskf {
         }
     }
 
+    /// Bytes held by the IMU history and the delay buffer.
+    pub fn buffered_bytes(&self) -> usize {
+        self.imu.capacity() * size_of::<ImuSample>() + self.buffer.bytes()
+    }
+
     /// The barometer source (state, offset, diagnostics).
     pub fn baro_source(&self) -> &BaroHeightSource {
         &self.baro
@@ -343,7 +348,10 @@ impl Eskf {
         }
         self.corrected = false;
         let target = s.t_ns - self.horizon_lag_ns;
-        while self.imu.len() >= 2 && self.imu[1].t_ns <= target {
+        // Kept below the bound before the next push, so the deque never reserves beyond it.
+        while self.imu.len() >= 2
+            && (self.imu[1].t_ns <= target || self.imu.len() >= MAX_IMU_HISTORY)
+        {
             self.step();
         }
         // Borrowed, not copied: this runs for every IMU sample of every vehicle of the service.

@@ -185,14 +185,20 @@ impl PaperFilter {
         }
     }
 
+    /// Bytes held by the attitude history.
+    pub fn buffered_bytes(&self) -> usize {
+        self.imu.capacity() * size_of::<ImuSample>()
+    }
+
     /// IMU sample: propagates all three filters (eqs. 29–31).
     pub fn push_imu(&mut self, s: &ImuSample) -> Option<PoseOutput> {
         let prev = self.imu.back().copied();
         self.imu.push_back(*s);
-        while self
-            .imu
-            .front()
-            .is_some_and(|f| s.t_ns - f.t_ns > 2_000_000_000)
+        while self.imu.len() >= crate::buffer::MAX_IMU_HISTORY
+            || self
+                .imu
+                .front()
+                .is_some_and(|f| s.t_ns - f.t_ns > 2_000_000_000)
         {
             self.imu.pop_front();
         }

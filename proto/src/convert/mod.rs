@@ -38,8 +38,11 @@ pub mod limits {
     pub const PRESSURE_RANGE_PA: (f64, f64) = (500.0, 120_000.0);
     /// Accepted sensor temperature range, °C.
     pub const TEMPERATURE_RANGE_DEGC: (f64, f64) = (-90.0, 150.0);
-    /// Longest accepted GNSS stamp delay, s (autopilots report 0.1–0.5 s).
-    pub const MAX_GNSS_DELAY_S: f64 = 5.0;
+    /// Longest accepted GNSS stamp delay, s (autopilots report 0.1–0.5 s: ArduPilot's
+    /// `EK3_GPS_DELAY` tops at 0.25 s, PX4's `EKF2_GPS_DELAY` at 0.3 s). The fusion horizon trails
+    /// by it, and the estimator's IMU history (2,048 samples) covers a second plus the fusion
+    /// delay at 1 kHz; longer means a wrong unit.
+    pub const MAX_GNSS_DELAY_S: f64 = 1.0;
     /// Largest accepted deviation of a quaternion's norm from 1 (the quaternion is then normalised).
     pub const QUAT_NORM_TOL: f64 = 1.0e-2;
     /// Most IMU samples in one `ImuBatch` (counted on the wire before decoding: see
