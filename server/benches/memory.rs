@@ -6,7 +6,8 @@
 //! 2 s of silence so that the run ends in minutes) takes each attack in turn; the resident memory
 //! of the process is sampled every 5 ms. Targets: the peak never above the formula's total, and
 //! once the attacks are over and their vehicles evicted, the resident memory back within 20 % of
-//! the baseline taken before them.
+//! the baseline taken before them. Runs with the allocator options of `uavnavd`
+//! (`uavnavd::allocator`), unless the environment sets them.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 #[global_allocator]
@@ -197,8 +198,14 @@ async fn idle_connections(server: &uavnavd::RunningServer) -> usize {
     held.len()
 }
 
+fn main() {
+    // The allocator options `uavnavd` runs with (re-executes once, as the binary does).
+    uavnavd::allocator::apply_service_options();
+    attacks();
+}
+
 #[tokio::main(flavor = "multi_thread", worker_threads = 2)]
-async fn main() {
+async fn attacks() {
     let args: Vec<String> = std::env::args().collect();
     let ids = args
         .iter()
@@ -219,6 +226,7 @@ async fn main() {
     tokio::time::sleep(Duration::from_secs(2)).await;
     let sampler = Sampler::start();
     let baseline = rss_bytes();
+
     println!("baseline: {:.1} MiB", mib(baseline));
     println!("{:<44} {:>10} {:>10}", "attack", "peak MiB", "after MiB");
     let mut worst = 0u64;
@@ -266,6 +274,7 @@ async fn main() {
     report(&format!("{n} idle TCP connections"), peak, rss_bytes());
 
     quiet(&server).await;
+
     let after = rss_bytes();
     let (limit, back) = (budget.total(), after as f64 <= baseline as f64 * 1.2);
     println!(

@@ -15,6 +15,7 @@
 //! | [`transport::zenoh_stats`] | what Zenoh dropped on congested links, read from its runtime into `/metrics` |
 //! | [`transport::http`] | `/metrics`, `/livez`, `/readyz` |
 //! | [`ingest`] | the transport-neutral ingest path (validate, gate, route, count) |
+//! | [`allocator`] | the allocator options of a long-running service (the binaries re-execute once with them) |
 //! | [`budget`] | the worst-case resident memory of a configuration (`--memory-budget`) |
 //! | [`ingest::validate`] | field-by-field input checks with precise statuses |
 //! | [`ingest::gate`] | the ingest time gate: late, duplicate, backwards, future, clock resync |
@@ -39,6 +40,7 @@
 //! their former paths (`uavnavd::engine`, `uavnavd::registry`, `uavnavd::zenoh_io`, ...) through
 //! the re-exports below.
 
+pub mod allocator;
 pub mod budget;
 pub mod config;
 pub mod ingest;

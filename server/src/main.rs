@@ -9,5 +9,7 @@ use std::process::ExitCode;
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() -> ExitCode {
+    // The allocator options of a long-running service (see `allocator`): re-executes once.
+    uavnavd::allocator::apply_service_options();
     uavnavd::run()
 }
