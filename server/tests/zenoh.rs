@@ -18,6 +18,54 @@ fn enc(name: &str) -> zenoh::bytes::Encoding {
     uavnavd::zenoh_io::encoding(name)
 }
 
+/// Zenoh puts have no ack, so a Zenoh client learns from the health reports that a vehicle it
+/// feeds runs without its configuration (a restarted service, an idle eviction): `configured`
+/// is false until the configuration is put again.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn health_says_when_a_vehicle_lost_its_configuration() {
+    let mut cfg = test_config();
+    let endpoint = listen_zenoh(&mut cfg);
+    let server = start(cfg).await;
+    let z = zenoh_peer(&endpoint).await;
+    let health = z
+        .declare_subscriber(keys::vehicle_key("forgot", Leaf::Health))
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let key = |leaf: Leaf| keys::vehicle_key("forgot", leaf);
+    let put_imu = |t: i64| {
+        let batch = pb::ImuBatch {
+            samples: vec![imu(t)],
+        };
+        z.put(key(Leaf::Imu), batch.encode_to_vec())
+            .encoding(enc("uavnav.v1.ImuBatch"))
+    };
+    put_imu(1_000_000_000).await.unwrap();
+    let next = || async {
+        let s = tokio::time::timeout(Duration::from_secs(5), health.recv_async())
+            .await
+            .expect("health over zenoh")
+            .unwrap();
+        pb::VehicleHealth::decode(&*s.payload().to_bytes()).unwrap()
+    };
+    let h = next().await;
+    assert!(!h.configured, "created from data alone: {h:?}");
+    z.put(key(Leaf::Config), vehicle_config(false).encode_to_vec())
+        .encoding(enc("uavnav.v1.VehicleConfig"))
+        .await
+        .unwrap();
+    put_imu(1_005_000_000).await.unwrap();
+    let mut configured = false;
+    for _ in 0..20 {
+        if next().await.configured {
+            configured = true;
+            break;
+        }
+    }
+    assert!(configured, "the health never said configured");
+    server.shutdown().await.unwrap();
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn zenoh_round_trip() {
     let mut cfg = test_config();
@@ -95,6 +143,7 @@ async fn zenoh_round_trip() {
     assert_eq!(h.encoding(), &enc("uavnav.v1.VehicleHealth"));
     let h = pb::VehicleHealth::decode(&*h.payload().to_bytes()).unwrap();
     assert_eq!(h.vehicle_id, "zv");
+    assert!(h.configured, "configured over Zenoh: {h:?}");
 
     // The malformed put shows up in the vehicle's health and the metrics.
     let reg = server.registry().clone();

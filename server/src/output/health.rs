@@ -110,6 +110,7 @@ impl HealthWindow {
                 None
             },
             reorder_depth: reorder_depth.min(u32::MAX as usize) as u32,
+            configured: shared.configured.load(std::sync::atomic::Ordering::Relaxed),
         };
         self.since = now;
         self.counts_at_start = counts;
