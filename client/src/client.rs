@@ -224,7 +224,12 @@ impl Client {
                 Ok(Some(created))
             }
             #[cfg(feature = "zenoh")]
-            Backend::Zenoh(s) => zenoh_backend::configure(s, id, config).await.map(|()| None),
+            Backend::Zenoh(s) => {
+                zenoh_backend::configure(s, id, config).await?;
+                // Re-put by a Zenoh ingest stream's keeper when the service loses it.
+                self.configs.remember(id, config);
+                Ok(None)
+            }
             Backend::Discard => Ok(None),
         }
     }
@@ -349,7 +354,14 @@ impl Client {
                 Ingest::new(Sink::Grpc(tx), stats, Some(task))
             }
             #[cfg(feature = "zenoh")]
-            Backend::Zenoh(s) => Ingest::new(Sink::Zenoh(s.clone()), stats, None),
+            Backend::Zenoh(s) => {
+                let keeper = crate::zenoh_keeper::ConfigKeeper::spawn(
+                    s.clone(),
+                    self.configs.clone(),
+                    Arc::clone(&stats),
+                );
+                Ingest::new(Sink::Zenoh(s.clone(), Arc::new(keeper)), stats, None)
+            }
             Backend::Discard => Ingest::new(Sink::Discard, stats, None),
         })
     }

@@ -11,7 +11,9 @@
 //! a vehicle this client configured: an idle eviction, a restart the stream did not see) makes
 //! the driver re-send that vehicle's configuration in the same stream (while it is open), once
 //! until it is acknowledged, also counted there. Over Zenoh each message is a `put` on the
-//! vehicle's key (congestion control `Block`: never dropped locally); there are no acks.
+//! vehicle's key (congestion control `Block`: never dropped locally); there are no acks, and the
+//! stream's [`crate::zenoh_keeper`] re-puts a configuration when the vehicle's health reports say
+//! the service runs it without one (also counted in `configs_resent`).
 //!
 //! Refusals are not retried: an ack `PERMISSION_DENIED` (a vehicle outside the caller's grants)
 //! is counted with its reason ([`IngestStats::permission_denied`]); a stream refused as a whole
@@ -68,7 +70,7 @@ impl IngestStats {
         }
     }
 
-    fn error(&self, msg: String) {
+    pub(crate) fn error(&self, msg: String) {
         if let Ok(mut m) = self.errors.lock() {
             *m.entry(msg).or_default() += 1;
         }
@@ -194,7 +196,7 @@ mod tests {
 pub(crate) enum Sink {
     Grpc(mpsc::Sender<pb::SensorEnvelope>),
     #[cfg(feature = "zenoh")]
-    Zenoh(zenoh::Session),
+    Zenoh(zenoh::Session, Arc<crate::zenoh_keeper::ConfigKeeper>),
     Discard,
 }
 
@@ -263,9 +265,10 @@ impl IngestSender {
                 self.stats.bytes.fetch_add(len as u64, Ordering::Relaxed);
             }
             #[cfg(feature = "zenoh")]
-            Sink::Zenoh(session) => {
+            Sink::Zenoh(session, keeper) => {
                 let key = crate::keys::vehicle_key(vehicle_id, leaf);
-                self.await_subscriber(session, vehicle_id, &key).await;
+                self.await_subscriber(session, keeper, vehicle_id, &key)
+                    .await;
                 let body = encode_payload(&payload);
                 let len = body.len();
                 let put = session
@@ -280,6 +283,9 @@ impl IngestSender {
                         key,
                         reason: e.to_string(),
                     });
+                }
+                if let Payload::Config(c) = &payload {
+                    keeper.remember(vehicle_id, c);
                 }
                 self.stats.bytes.fetch_add(len as u64, Ordering::Relaxed);
                 self.stats.accepted.fetch_add(1, Ordering::Relaxed);
@@ -312,8 +318,15 @@ impl IngestSender {
 
     #[cfg(feature = "zenoh")]
     /// On a vehicle's first Zenoh message: waits until the service's subscription is known, so
-    /// the start of the stream is not routed nowhere. Counted as an error when none shows up.
-    async fn await_subscriber(&self, session: &zenoh::Session, vehicle_id: &str, key: &str) {
+    /// the start of the stream is not routed nowhere (counted as an error when none shows up),
+    /// and has the keeper watch the vehicle's health.
+    async fn await_subscriber(
+        &self,
+        session: &zenoh::Session,
+        keeper: &crate::zenoh_keeper::ConfigKeeper,
+        vehicle_id: &str,
+        key: &str,
+    ) {
         let known = self
             .matched
             .lock()
@@ -334,6 +347,7 @@ impl IngestSender {
         if let Ok(mut m) = self.matched.lock() {
             m.insert(vehicle_id.to_string());
         }
+        keeper.watch(vehicle_id);
     }
 }
 
@@ -414,6 +428,12 @@ impl Configs {
         if let Ok(mut m) = self.0.lock() {
             m.insert(id.to_string(), *config);
         }
+    }
+
+    /// The remembered configuration of vehicle `id`.
+    #[cfg(feature = "zenoh")]
+    pub(crate) fn get(&self, id: &str) -> Option<pb::VehicleConfig> {
+        self.0.lock().ok()?.get(id).copied()
     }
 
     /// The remembered configuration of vehicle `id` as an envelope to re-send, if any.

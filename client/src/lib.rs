@@ -49,6 +49,8 @@ pub mod security;
 pub mod watch;
 #[cfg(feature = "zenoh")]
 pub mod zenoh_backend;
+#[cfg(feature = "zenoh")]
+pub mod zenoh_keeper;
 
 pub use backoff::Backoff;
 pub use client::{Client, ConnectOptions};

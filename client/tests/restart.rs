@@ -150,3 +150,70 @@ async fn a_forgotten_vehicle_is_configured_again() {
     );
     server.shutdown().await.unwrap();
 }
+
+/// Over Zenoh there are no acks: a vehicle the service forgot (evicted after `idle_evict_s` of
+/// silence) says so in its health reports (`configured: false`), and the ingest stream's keeper
+/// puts the configuration the client gave again.
+#[cfg(feature = "zenoh")]
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_forgotten_vehicle_is_configured_again_over_zenoh() {
+    let mut cfg = loopback_config();
+    let endpoint = uavnav_tests::service::listen_zenoh(&mut cfg);
+    cfg.vehicles.idle_evict_s = 0.5;
+    cfg.health.period_ms = 200;
+    let server = uavnavd::Server::start(cfg).await.unwrap();
+    let url = format!("zenoh/{endpoint}");
+    let client = Client::connect(&url.parse().unwrap(), ConnectOptions::default())
+        .await
+        .unwrap();
+    let (config, msgs) = flight(4.0);
+    client.configure("zevicted", &config).await.unwrap();
+    let ingest = client.ingest().await.unwrap();
+    let half = msgs.len() / 2;
+    for m in &msgs[..half] {
+        ingest.send("zevicted", m.clone()).await.unwrap();
+    }
+    let configured = |s: &uavnavd::RunningServer| {
+        s.registry()
+            .get("zevicted")
+            .is_some_and(|h| h.shared.configured.load(Ordering::Relaxed))
+    };
+    assert!(eventually(Duration::from_secs(10), || configured(&server)).await);
+    let stats = std::sync::Arc::clone(ingest.stats());
+    assert_eq!(stats.configs_resent.load(Ordering::Relaxed), 0);
+    assert!(
+        eventually(Duration::from_secs(10), || server
+            .registry()
+            .get("zevicted")
+            .is_none())
+        .await,
+        "the vehicle was not evicted"
+    );
+    // The drone streams on: the service creates the vehicle from its data, on its defaults, and
+    // its health says so; the keeper puts the configuration again.
+    for m in &msgs[half..] {
+        ingest.send("zevicted", m.clone()).await.unwrap();
+    }
+    assert!(
+        eventually(Duration::from_secs(20), || stats
+            .configs_resent
+            .load(Ordering::Relaxed)
+            >= 1)
+        .await,
+        "no configuration was re-put"
+    );
+    assert!(
+        eventually(Duration::from_secs(10), || configured(&server)).await,
+        "the vehicle runs without its configuration"
+    );
+    let h = server.registry().get("zevicted").unwrap();
+    let running = h.shared.config.lock().unwrap().clone().unwrap();
+    assert_eq!(
+        *running,
+        uavnav_core::VehicleConfig::try_from(&config).unwrap()
+    );
+    drop(h);
+    drop(ingest);
+    client.close().await;
+    server.shutdown().await.unwrap();
+}
