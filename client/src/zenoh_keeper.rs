@@ -10,9 +10,9 @@
 //! [`IngestStats::configs_resent`]. The keeper's task ends when the stream and every sender are
 //! dropped.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
+use std::sync::Arc;
 use std::sync::atomic::Ordering;
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use prost::Message;
@@ -34,8 +34,6 @@ const PENDING_REPORTS: usize = 1024;
 #[derive(Debug)]
 pub(crate) struct ConfigKeeper {
     configs: Configs,
-    /// Vehicles whose health is watched already (each is sent to the task once).
-    watched: Mutex<BTreeSet<String>>,
     watch: mpsc::UnboundedSender<String>,
     task: JoinHandle<()>,
 }
@@ -57,7 +55,6 @@ impl ConfigKeeper {
         let task = tokio::spawn(run(session, configs.clone(), stats, rx));
         Self {
             configs,
-            watched: Mutex::default(),
             watch,
             task,
         }
@@ -68,17 +65,11 @@ impl ConfigKeeper {
         self.configs.remember(id, config);
     }
 
-    /// Watches the health of vehicle `id` from now on (once per vehicle; the channel holds at
-    /// most one entry per vehicle).
+    /// Watches the health of vehicle `id` from now on. Called on a vehicle's first message of
+    /// the stream (`IngestSender::await_subscriber`), so the channel sees each vehicle about once;
+    /// the task ignores a vehicle it watches already.
     pub(crate) fn watch(&self, id: &str) {
-        let new = self
-            .watched
-            .lock()
-            .map(|mut w| w.insert(id.to_string()))
-            .unwrap_or(false);
-        if new {
-            let _ = self.watch.send(id.to_string());
-        }
+        let _ = self.watch.send(id.to_string());
     }
 }
 
@@ -89,13 +80,16 @@ async fn run(
     mut watch: mpsc::UnboundedReceiver<String>,
 ) {
     let (unconfigured_tx, mut unconfigured) = mpsc::channel::<String>(PENDING_REPORTS);
-    // Dropping a subscriber undeclares it: they live as long as the task.
-    let mut subscribers = Vec::new();
+    // Dropping a subscriber undeclares it: they live as long as the task, one per vehicle.
+    let mut subscribers = BTreeMap::new();
     let mut last_put: BTreeMap<String, Instant> = BTreeMap::new();
     loop {
         tokio::select! {
             id = watch.recv() => {
                 let Some(id) = id else { return };
+                if subscribers.contains_key(&id) {
+                    continue;
+                }
                 let key = keys::vehicle_key(&id, Leaf::Health);
                 let tx = unconfigured_tx.clone();
                 let sub = session
@@ -110,7 +104,9 @@ async fn run(
                     })
                     .await;
                 match sub {
-                    Ok(s) => subscribers.push(s),
+                    Ok(s) => {
+                        subscribers.insert(id, s);
+                    }
                     Err(e) => stats.error(format!("zenoh subscribe {key}: {e}")),
                 }
             }

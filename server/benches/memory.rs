@@ -226,7 +226,6 @@ async fn attacks() {
     tokio::time::sleep(Duration::from_secs(2)).await;
     let sampler = Sampler::start();
     let baseline = rss_bytes();
-
     println!("baseline: {:.1} MiB", mib(baseline));
     println!("{:<44} {:>10} {:>10}", "attack", "peak MiB", "after MiB");
     let mut worst = 0u64;
@@ -274,7 +273,6 @@ async fn attacks() {
     report(&format!("{n} idle TCP connections"), peak, rss_bytes());
 
     quiet(&server).await;
-
     let after = rss_bytes();
     let (limit, back) = (budget.total(), after as f64 <= baseline as f64 * 1.2);
     println!(
