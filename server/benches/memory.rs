@@ -213,8 +213,19 @@ async fn attacks() {
         .and_then(|i| args.get(i + 1))
         .and_then(|v| v.parse().ok())
         .unwrap_or(20_000usize);
+    let flag = |name: &str| args.iter().any(|a| a == name);
+    // `--only N` runs attack N (1-5) alone; `--no-zenoh` runs without Zenoh: both tell where
+    // what stays after the attacks comes from.
+    let only: Option<usize> = args
+        .iter()
+        .position(|a| a == "--only")
+        .and_then(|i| args.get(i + 1))
+        .and_then(|v| v.parse().ok());
+    let run = |n: usize| only.is_none_or(|o| o == n);
     let mut cfg = uavnav_tests::service::loopback_config();
-    uavnav_tests::service::listen_zenoh(&mut cfg);
+    if !flag("--no-zenoh") {
+        uavnav_tests::service::listen_zenoh(&mut cfg);
+    }
     cfg.vehicles.idle_evict_s = 2.0;
     let budget = MemoryBudget::of(&cfg);
     println!("the formula for this configuration:\n{budget}");
@@ -234,43 +245,53 @@ async fn attacks() {
         println!("{what:<44} {:>10.1} {:>10.1}", mib(peak), mib(after));
     };
 
-    sampler.take();
-    flood(&server, ids).await;
-    let peak = sampler.take();
-    quiet(&server).await;
-    report(
-        &format!("{ids} new ids, one IMU sample each"),
-        peak,
-        rss_bytes(),
-    );
+    if run(1) {
+        sampler.take();
+        flood(&server, ids).await;
+        let peak = sampler.take();
+        quiet(&server).await;
+        report(
+            &format!("{ids} new ids, one IMU sample each"),
+            peak,
+            rss_bytes(),
+        );
+    }
 
-    sampler.take();
-    time_gate(&server).await;
-    let peak = sampler.take();
-    quiet(&server).await;
-    report("far-future and i64::MAX stamps", peak, rss_bytes());
+    if run(2) {
+        sampler.take();
+        time_gate(&server).await;
+        let peak = sampler.take();
+        quiet(&server).await;
+        report("far-future and i64::MAX stamps", peak, rss_bytes());
+    }
 
-    sampler.take();
-    batch_bombs(&server, max_message).await;
-    let peak = sampler.take();
-    quiet(&server).await;
-    report("4 x 16 MiB batches of empty samples", peak, rss_bytes());
+    if run(3) {
+        sampler.take();
+        batch_bombs(&server, max_message).await;
+        let peak = sampler.take();
+        quiet(&server).await;
+        report("4 x 16 MiB batches of empty samples", peak, rss_bytes());
+    }
 
-    sampler.take();
-    let n = cameras(&server, total_pixels).await;
-    let peak = sampler.take();
-    quiet(&server).await;
-    report(
-        &format!("{n} 2048x2048 camera vehicles, PNG bomb"),
-        peak,
-        rss_bytes(),
-    );
+    if run(4) {
+        sampler.take();
+        let n = cameras(&server, total_pixels).await;
+        let peak = sampler.take();
+        quiet(&server).await;
+        report(
+            &format!("{n} 2048x2048 camera vehicles, PNG bomb"),
+            peak,
+            rss_bytes(),
+        );
+    }
 
-    sampler.take();
-    let n = idle_connections(&server).await;
-    let peak = sampler.take();
-    tokio::time::sleep(Duration::from_secs(2)).await;
-    report(&format!("{n} idle TCP connections"), peak, rss_bytes());
+    if run(5) {
+        sampler.take();
+        let n = idle_connections(&server).await;
+        let peak = sampler.take();
+        tokio::time::sleep(Duration::from_secs(2)).await;
+        report(&format!("{n} idle TCP connections"), peak, rss_bytes());
+    }
 
     quiet(&server).await;
     let after = rss_bytes();

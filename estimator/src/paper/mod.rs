@@ -75,6 +75,9 @@ pub struct PaperFilter {
     body_from_cam: Option<Isometry3<f64>>,
     gyro_psd: f64,
     accel_psd: f64,
+    /// Gyro and accelerometer noise PSDs the data itself shows (see [`Self::observe_imu_noise`]),
+    /// smoothed over [`OBSERVED_NOISE_WINDOW_S`].
+    observed_psd: (f64, f64),
     origin: Option<Lla>,
     frame: Option<LocalFrame>,
     w_ie: Vector3<f64>,
@@ -112,6 +115,36 @@ pub struct PaperFilter {
 pub const DIVERGED_TILT_RAD: f64 = 0.436; // 25°
 /// Fixes in a row (≈ 2 s at 5 Hz) of tilt disagreement that restart the filters.
 pub const DIVERGED_FIXES: u32 = 10;
+/// Time constant of the smoothing of the observed IMU noise, s.
+pub const OBSERVED_NOISE_WINDOW_S: f64 = 0.5;
+
+/// The process noise the IMU data itself shows, as the `eskf` profile takes it
+/// (`Eskf::observed_imu_noise`): real IMUs are noisier in flight than their datasheets
+/// (vibration), and a logged 10 Hz IMU of a manoeuvring aircraft misses what happens between its
+/// samples. For white noise of per-axis PSD `q`, the change between consecutive samples has
+/// `E|Δ|² = 6 q / dt` over three axes, so `|Δ|² dt / 6` estimates `q`; for a sampled signal it
+/// is the order of one interval's integration error. The estimate is smoothed over
+/// [`OBSERVED_NOISE_WINDOW_S`] (a per-sample maximum would inflate white noise by its own
+/// spread) and used where it exceeds the configured densities. The paper leaves the process
+/// noise to the designer; with datasheet values its attitude σ on the shared real plane was
+/// 3σ-consistent in 46 % of the rows. Returns the gyro and accelerometer PSDs to use.
+fn observe_imu_noise(
+    observed: &mut (f64, f64),
+    a: &ImuSample,
+    b: &ImuSample,
+    dt_s: f64,
+    gyro_psd: f64,
+    accel_psd: f64,
+) -> (f64, f64) {
+    if dt_s.is_finite() && dt_s > 0.0 {
+        let g = (b.gyro_radps - a.gyro_radps).norm_squared() * dt_s / 6.0;
+        let f = (b.accel_mps2 - a.accel_mps2).norm_squared() * dt_s / 6.0;
+        let k = (dt_s / OBSERVED_NOISE_WINDOW_S).min(1.0);
+        observed.0 += k * (g - observed.0);
+        observed.1 += k * (f - observed.1);
+    }
+    (gyro_psd.max(observed.0), accel_psd.max(observed.1))
+}
 
 impl PaperFilter {
     /// The three filters for one vehicle.
@@ -125,6 +158,7 @@ impl PaperFilter {
             body_from_cam: config.camera.as_ref().map(|c| c.body_from_cam),
             gyro_psd: config.imu.gyro_noise_density.powi(2),
             accel_psd: config.imu.accel_noise_density.powi(2),
+            observed_psd: (0.0, 0.0),
             origin,
             frame: None,
             w_ie: Vector3::zeros(),
@@ -179,6 +213,7 @@ impl PaperFilter {
         fresh.fixes_without_velocity = 0;
         fresh.tilt_disagree = 0;
         fresh.divergence_resets = 0;
+        fresh.observed_psd = (0.0, 0.0);
         *self = fresh;
         if let Some(o) = cfg_frame {
             self.set_frame(o);
@@ -219,11 +254,19 @@ impl PaperFilter {
         };
         let m = mean_of(&prev, s);
         let dt_s = (s.t_ns - prev.t_ns) as f64 * 1e-9;
+        let (gyro_psd, accel_psd) = observe_imu_noise(
+            &mut self.observed_psd,
+            &prev,
+            s,
+            dt_s,
+            self.gyro_psd,
+            self.accel_psd,
+        );
         att.predict(
             &m.gyro,
             &self.w_ie,
             dt_s,
-            self.gyro_psd + self.params.paper_gyro_instability_psd,
+            gyro_psd + self.params.paper_gyro_instability_psd,
             s.t_ns,
         );
         let c = att.rotation();
@@ -232,7 +275,7 @@ impl PaperFilter {
             .gravity
             .get_or_insert_with(|| GravityCache::new(&frame, &gi.x))
             .at(&frame, &gi.x);
-        let q_acc = self.accel_psd + m.accel.norm_squared() * att_var;
+        let q_acc = accel_psd + m.accel.norm_squared() * att_var;
         gi.predict(&c, &m.accel, &g, &self.w_ie, dt_s, q_acc);
         self.vel_hist.push_back((s.t_ns, gi.v));
         while self
