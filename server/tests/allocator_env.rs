@@ -1,5 +1,5 @@
 //! The `uavnavd` binary re-executes itself once with the allocator options of a long-running
-//! service (`MIMALLOC_PURGE_DELAY=0`, `MIMALLOC_ARENA_EAGER_COMMIT=0`), keeping the pid and the
+//! service (`uavnavd::allocator::ALLOCATOR_ENV`), keeping the pid and the
 //! arguments, and leaves alone what the environment already sets.
 #![cfg(target_os = "linux")]
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
@@ -27,12 +27,13 @@ fn run_with(env: &[(&str, &str)]) -> Vec<String> {
         "--http-addr",
         "127.0.0.1:0",
     ])
-    .env_remove("MIMALLOC_PURGE_DELAY")
-    .env_remove("MIMALLOC_ARENA_EAGER_COMMIT")
     .env_remove("UAVNAVD_ALLOCATOR_OPTIONS_SET")
     .env_remove("UAVNAV_CONFIG")
     .stdout(Stdio::null())
     .stderr(Stdio::null());
+    for (k, _) in uavnavd::allocator::ALLOCATOR_ENV {
+        cmd.env_remove(k);
+    }
     for (k, v) in env {
         cmd.env(k, v);
     }
@@ -57,11 +58,9 @@ fn run_with(env: &[(&str, &str)]) -> Vec<String> {
 #[test]
 fn the_service_runs_with_the_allocator_options_of_a_long_running_process() {
     let env = run_with(&[]);
-    assert!(env.iter().any(|e| e == "MIMALLOC_PURGE_DELAY=0"), "{env:?}");
-    assert!(
-        env.iter().any(|e| e == "MIMALLOC_ARENA_EAGER_COMMIT=0"),
-        "{env:?}"
-    );
+    for (k, v) in uavnavd::allocator::ALLOCATOR_ENV {
+        assert!(env.iter().any(|e| *e == format!("{k}={v}")), "{k}: {env:?}");
+    }
 }
 
 #[test]

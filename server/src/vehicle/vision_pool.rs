@@ -5,11 +5,25 @@
 //! hands a camera frame to its estimator and sheds the frame when the pool is full. A job the
 //! estimator already created is always accepted (dropping it would stall that vehicle), and each
 //! vehicle has at most one job out, so the queue never exceeds the number of camera vehicles.
+//!
+//! A worker that stays idle for [`IDLE_HANDOVER`] hands its place to a fresh thread and exits.
+//! Why: the allocator (mimalloc) gives each thread its own heap, and memory a vision thread
+//! allocated (a tracker's image pyramid, megabytes for a large camera) but another thread freed
+//! (the vehicle's actor, at eviction) goes back to the allocating thread's heap only when that
+//! thread allocates again; an idle vision thread never does, so after camera vehicles left the
+//! service kept their memory. A thread that exits abandons its heap, whose free pages the
+//! allocator then returns (`MIMALLOC_ABANDONED_PAGE_PURGE`, `uavnavd::allocator`), and whose
+//! remaining blocks are reclaimed by the thread that frees them
+//! (`MIMALLOC_ABANDONED_RECLAIM_ON_FREE`).
 
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
-use std::sync::mpsc::{Receiver, Sender, channel};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, channel};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
+use std::time::Duration;
+
+/// Idle time after which a worker hands its place to a fresh thread (see the module doc).
+pub const IDLE_HANDOVER: Duration = Duration::from_secs(2);
 
 /// A unit of vision work: runs on a pool thread and delivers its own result (through a channel
 /// it captured).
@@ -20,6 +34,8 @@ struct PoolState {
     in_flight: AtomicUsize,
     completed: AtomicU64,
     panicked: AtomicU64,
+    /// Workers replaced after an idle spell.
+    handovers: AtomicU64,
 }
 
 /// The worker pool.
@@ -28,7 +44,7 @@ pub struct VisionPool {
     tx: Mutex<Option<Sender<Job>>>,
     state: Arc<PoolState>,
     capacity: usize,
-    workers: Mutex<Vec<JoinHandle<()>>>,
+    workers: Arc<Mutex<Vec<JoinHandle<()>>>>,
     worker_count: usize,
 }
 
@@ -43,6 +59,8 @@ pub struct PoolStats {
     pub completed: u64,
     /// Jobs that panicked (the vehicle's actor sees the result channel closed and resets).
     pub panicked: u64,
+    /// Workers replaced by a fresh thread after an idle spell ([`IDLE_HANDOVER`]).
+    pub handovers: u64,
 }
 
 impl VisionPool {
@@ -50,22 +68,19 @@ impl VisionPool {
     pub fn new(workers: usize, queue: usize) -> std::io::Result<Arc<Self>> {
         let n = workers.max(1);
         let (tx, rx) = channel::<Job>();
-        let rx = Arc::new(Mutex::new(rx));
-        let state = Arc::new(PoolState::default());
-        let mut handles = Vec::with_capacity(n);
+        let shared = Shared {
+            rx: Arc::new(Mutex::new(rx)),
+            state: Arc::new(PoolState::default()),
+            handles: Arc::new(Mutex::new(Vec::with_capacity(n))),
+        };
         for i in 0..n {
-            let (rx, state) = (Arc::clone(&rx), Arc::clone(&state));
-            handles.push(
-                std::thread::Builder::new()
-                    .name(format!("uavnav-vision-{i}"))
-                    .spawn(move || worker(rx, state))?,
-            );
+            spawn_worker(i, shared.clone())?;
         }
         Ok(Arc::new(Self {
             tx: Mutex::new(Some(tx)),
-            state,
+            state: shared.state,
             capacity: n + queue,
-            workers: Mutex::new(handles),
+            workers: shared.handles,
             worker_count: n,
         }))
     }
@@ -95,6 +110,7 @@ impl VisionPool {
             in_flight: s.in_flight.load(Ordering::Relaxed),
             completed: s.completed.load(Ordering::Relaxed),
             panicked: s.panicked.load(Ordering::Relaxed),
+            handovers: s.handovers.load(Ordering::Relaxed),
         }
     }
 
@@ -103,31 +119,71 @@ impl VisionPool {
         if let Ok(mut tx) = self.tx.lock() {
             tx.take();
         }
-        let handles = self
-            .workers
-            .lock()
-            .map(|mut w| std::mem::take(&mut *w))
-            .unwrap_or_default();
-        for h in handles {
-            let _ = h.join();
+        // A worker handing over at this moment may add a handle after a take: take until none.
+        loop {
+            let handles = self
+                .workers
+                .lock()
+                .map(|mut w| std::mem::take(&mut *w))
+                .unwrap_or_default();
+            if handles.is_empty() {
+                break;
+            }
+            for h in handles {
+                let _ = h.join();
+            }
         }
     }
 }
 
-fn worker(rx: Arc<Mutex<Receiver<Job>>>, state: Arc<PoolState>) {
+/// What every worker thread holds.
+#[derive(Clone)]
+struct Shared {
+    rx: Arc<Mutex<Receiver<Job>>>,
+    state: Arc<PoolState>,
+    /// Join handles of the live workers (and of exited ones not yet joined).
+    handles: Arc<Mutex<Vec<JoinHandle<()>>>>,
+}
+
+fn spawn_worker(i: usize, shared: Shared) -> std::io::Result<()> {
+    let handles = Arc::clone(&shared.handles);
+    let h = std::thread::Builder::new()
+        .name(format!("uavnav-vision-{i}"))
+        .spawn(move || worker(i, shared))?;
+    if let Ok(mut v) = handles.lock() {
+        // Exited workers leave their handles behind: drop those (detaching a finished thread).
+        v.retain(|h| !h.is_finished());
+        v.push(h);
+    }
+    Ok(())
+}
+
+fn worker(i: usize, shared: Shared) {
     loop {
         // Hold the lock only while taking one job.
-        let job = match rx.lock() {
-            Ok(r) => r.recv(),
+        let job = match shared.rx.lock() {
+            Ok(r) => r.recv_timeout(IDLE_HANDOVER),
             Err(_) => return,
         };
-        let Ok(job) = job else { return };
+        let job = match job {
+            Ok(job) => job,
+            Err(RecvTimeoutError::Timeout) => {
+                // Idle: a fresh thread takes this place, this one exits (see the module doc).
+                // If no thread can be started, this one stays.
+                if spawn_worker(i, shared.clone()).is_ok() {
+                    shared.state.handovers.fetch_add(1, Ordering::Relaxed);
+                    return;
+                }
+                continue;
+            }
+            Err(RecvTimeoutError::Disconnected) => return,
+        };
         // A panicking job must not take the pool down.
         if std::panic::catch_unwind(std::panic::AssertUnwindSafe(job)).is_err() {
-            state.panicked.fetch_add(1, Ordering::Relaxed);
+            shared.state.panicked.fetch_add(1, Ordering::Relaxed);
         }
-        state.completed.fetch_add(1, Ordering::Relaxed);
-        state.in_flight.fetch_sub(1, Ordering::AcqRel);
+        shared.state.completed.fetch_add(1, Ordering::Relaxed);
+        shared.state.in_flight.fetch_sub(1, Ordering::AcqRel);
     }
 }
 
@@ -153,6 +209,28 @@ mod tests {
         assert!(!pool.is_saturated());
         assert_eq!(pool.stats().completed, 2);
         assert!(!pool.submit(Box::new(|| {})), "closed after shutdown");
+    }
+
+    #[test]
+    fn an_idle_worker_hands_over_to_a_fresh_thread_and_the_pool_keeps_working() {
+        let pool = VisionPool::new(1, 0).unwrap();
+        let first = std::thread::current().id();
+        let (tx, rx) = std::sync::mpsc::channel();
+        let t = tx.clone();
+        assert!(pool.submit(Box::new(move || {
+            t.send(std::thread::current().id()).unwrap()
+        })));
+        let a = rx.recv().unwrap();
+        std::thread::sleep(IDLE_HANDOVER * 2 + Duration::from_millis(500));
+        assert!(pool.stats().handovers >= 1, "{:?}", pool.stats());
+        assert!(pool.submit(Box::new(move || {
+            tx.send(std::thread::current().id()).unwrap()
+        })));
+        let b = rx.recv().unwrap();
+        assert!(a != b && a != first, "a fresh thread ran the second job");
+        pool.shutdown();
+        assert_eq!(pool.stats().completed, 2);
+        assert_eq!(pool.stats().in_flight, 0);
     }
 
     #[test]
