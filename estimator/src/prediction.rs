@@ -265,6 +265,22 @@ fn add_process_noise(p: &mut Cov, dt_s: f64, q: &ProcessNoise) {
     }
 }
 
+/// The integration-error variance one IMU interval shows, per axis: `|Δ|² dt² / 6` for the gyro
+/// (rad²) and the accelerometer ((m/s)²), `Δ` the change between the interval's two samples.
+/// For white noise of per-axis PSD `q`, `E|Δ|² = 6 q / dt` over three axes, so this is `q dt`;
+/// for a sampled signal (vibration, a logged 10 Hz IMU of a manoeuvring aircraft) it is of the
+/// order of what the interval's integration misses. Both profiles take it as process noise where
+/// it exceeds the configured densities (`Eskf::observed_imu_noise`, `paper::observe_imu_noise`).
+pub fn interval_noise_var(
+    a: &uavnav_core::ImuSample,
+    b: &uavnav_core::ImuSample,
+    dt_s: f64,
+) -> (f64, f64) {
+    let dg = (b.gyro_radps - a.gyro_radps).norm_squared();
+    let da = (b.accel_mps2 - a.accel_mps2).norm_squared();
+    (dg * dt_s * dt_s / 6.0, da * dt_s * dt_s / 6.0)
+}
+
 /// Makes `p` exactly symmetric.
 pub fn symmetrize(p: &mut Cov) {
     for i in 0..N {

@@ -157,9 +157,9 @@ fn paper_profile_never_diverges_silently() {
             return;
         };
         assert_eq!(s.bad_sigma_rows, 0, "{name}: {s}");
-        // Roll and pitch follow the flown attitude (guards of the figures with the process noise the IMU data shows: copters
-        // 1.37/1.68° and 4.13/3.81°, the plane 6.69/9.00°; 8.26/10.99° on the plane with the
-        // datasheet's).
+        // Roll and pitch follow the flown attitude. Guards of the figures with the process noise
+        // the IMU data shows: copters 1.37/1.68° and 4.13/3.81°, the plane 6.69/9.00° (8.26/10.99°
+        // with the datasheet's).
         let bound = if name == "erle_plane_E" { 10.0 } else { 5.0 };
         assert!(
             s.rmse_deg[0] <= bound && s.rmse_deg[1] <= bound,

@@ -433,10 +433,9 @@ impl Eskf {
         if dt_s.is_nan() || dt_s <= 0.0 {
             return;
         }
-        let dg = (b.gyro_radps - a.gyro_radps).norm_squared();
-        let da = (b.accel_mps2 - a.accel_mps2).norm_squared();
-        self.acc.gyro_var += dg * dt_s * dt_s / 6.0;
-        self.acc.accel_var += da * dt_s * dt_s / 6.0;
+        let (gyro_var, accel_var) = crate::prediction::interval_noise_var(a, b, dt_s);
+        self.acc.gyro_var += gyro_var;
+        self.acc.accel_var += accel_var;
         let (accel_clipped, gyro_clipped) = clipped(a, b, &self.params);
         if accel_clipped || gyro_clipped {
             self.imu_clipped += 1;

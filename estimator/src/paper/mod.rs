@@ -75,7 +75,7 @@ pub struct PaperFilter {
     body_from_cam: Option<Isometry3<f64>>,
     gyro_psd: f64,
     accel_psd: f64,
-    /// Gyro and accelerometer noise PSDs the data itself shows (see [`Self::observe_imu_noise`]),
+    /// Gyro and accelerometer noise PSDs the data itself shows (see `observe_imu_noise`),
     /// smoothed over [`OBSERVED_NOISE_WINDOW_S`].
     observed_psd: (f64, f64),
     origin: Option<Lla>,
@@ -119,15 +119,11 @@ pub const DIVERGED_FIXES: u32 = 10;
 pub const OBSERVED_NOISE_WINDOW_S: f64 = 0.5;
 
 /// The process noise the IMU data itself shows, as the `eskf` profile takes it
-/// (`Eskf::observed_imu_noise`): real IMUs are noisier in flight than their datasheets
-/// (vibration), and a logged 10 Hz IMU of a manoeuvring aircraft misses what happens between its
-/// samples. For white noise of per-axis PSD `q`, the change between consecutive samples has
-/// `E|Δ|² = 6 q / dt` over three axes, so `|Δ|² dt / 6` estimates `q`; for a sampled signal it
-/// is the order of one interval's integration error. The estimate is smoothed over
-/// [`OBSERVED_NOISE_WINDOW_S`] (a per-sample maximum would inflate white noise by its own
-/// spread) and used where it exceeds the configured densities. The paper leaves the process
-/// noise to the designer; with datasheet values its attitude σ on the shared real plane was
-/// 3σ-consistent in 46 % of the rows. Returns the gyro and accelerometer PSDs to use.
+/// ([`crate::prediction::interval_noise_var`] per interval, divided by its length to give a
+/// PSD), smoothed over [`OBSERVED_NOISE_WINDOW_S`] (a per-sample maximum would inflate white
+/// noise by its own spread) and used where it exceeds the configured densities. The paper leaves
+/// the process noise to the designer; with datasheet values its attitude σ on the shared real
+/// plane was 3σ-consistent in 46 % of the rows. Returns the gyro and accelerometer PSDs to use.
 fn observe_imu_noise(
     observed: &mut (f64, f64),
     a: &ImuSample,
@@ -137,11 +133,10 @@ fn observe_imu_noise(
     accel_psd: f64,
 ) -> (f64, f64) {
     if dt_s.is_finite() && dt_s > 0.0 {
-        let g = (b.gyro_radps - a.gyro_radps).norm_squared() * dt_s / 6.0;
-        let f = (b.accel_mps2 - a.accel_mps2).norm_squared() * dt_s / 6.0;
+        let (g, f) = crate::prediction::interval_noise_var(a, b, dt_s);
         let k = (dt_s / OBSERVED_NOISE_WINDOW_S).min(1.0);
-        observed.0 += k * (g - observed.0);
-        observed.1 += k * (f - observed.1);
+        observed.0 += k * (g / dt_s - observed.0);
+        observed.1 += k * (f / dt_s - observed.1);
     }
     (gyro_psd.max(observed.0), accel_psd.max(observed.1))
 }
