@@ -17,6 +17,13 @@ pub struct ImuConfig {
     pub accel_noise_density: f64,
     /// Accelerometer bias random walk, m/s³/√Hz.
     pub accel_random_walk: f64,
+    /// 1-σ gyro bias per axis left at start (turn-on bias after any calibration), rad/s; 0 when
+    /// not known. The `eskf` starts its bias states with the larger of this and its own default
+    /// (`EstimatorParams::init_gyro_bias_sigma_radps`), so a consumer-grade IMU can say that its
+    /// biases are larger than the filter assumes.
+    pub gyro_bias_sigma_radps: f64,
+    /// 1-σ accelerometer bias per axis left at start, m/s²; 0 when not known (as the gyro's).
+    pub accel_bias_sigma_mps2: f64,
 }
 
 impl ImuConfig {
@@ -27,6 +34,8 @@ impl ImuConfig {
         gyro_random_walk: 2.0e-6,
         accel_noise_density: 1.0e-3,
         accel_random_walk: 1.0e-4,
+        gyro_bias_sigma_radps: 0.0,
+        accel_bias_sigma_mps2: 0.0,
     };
 }
 

@@ -227,6 +227,45 @@ fn bad_sensor_yaml_value_names_the_line() {
 }
 
 #[test]
+fn the_turn_on_biases_are_optional_and_checked() {
+    // Absent (EuRoC, Kalibr, older uavnav folders): 0, "not known".
+    let dir = tempfile::tempdir().unwrap();
+    common::write_asl(dir.path(), 1);
+    let p = dir.path().join("mav0/imu0/sensor.yaml");
+    let text = fs::read_to_string(&p).unwrap();
+    assert!(
+        text.contains("gyroscope_turn_on_bias_sigma: 0.005"),
+        "{text}"
+    );
+    let without: String = text
+        .lines()
+        .filter(|l| !l.contains("turn_on_bias"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    fs::write(&p, without).unwrap();
+    let imu = Dataset::open(dir.path()).unwrap().config().imu;
+    assert_eq!(
+        (imu.gyro_bias_sigma_radps, imu.accel_bias_sigma_mps2),
+        (0.0, 0.0)
+    );
+    // Negative: refused, naming the file, the line and the key.
+    let (_d, e) = broken(|mav| {
+        let p = mav.join("imu0/sensor.yaml");
+        let text = fs::read_to_string(&p).unwrap().replace(
+            "accelerometer_turn_on_bias_sigma: 0.2",
+            "accelerometer_turn_on_bias_sigma: -0.2",
+        );
+        fs::write(&p, text).unwrap();
+    });
+    let msg = e.to_string();
+    assert!(
+        msg.contains("imu0/sensor.yaml:")
+            && msg.contains("`accelerometer_turn_on_bias_sigma` must be"),
+        "{msg}"
+    );
+}
+
+#[test]
 fn not_a_dataset() {
     let dir = tempfile::tempdir().unwrap();
     let e = Dataset::open(dir.path()).unwrap_err();

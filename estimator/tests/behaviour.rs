@@ -402,6 +402,40 @@ fn initialises_in_flight_during_a_turn() {
     assert!((last.vel_ned_mps - t.vel_ned_mps).norm() < 0.1);
 }
 
+/// The IMU's turn-on bias σ (`ImuConfig::gyro_bias_sigma_radps`) widens the filter's initial
+/// bias prior where it is larger than the default, which stays a floor. Seen through the motion
+/// prior the filter gives the vision front end before it is initialised: rotation σ =
+/// gyro noise × √dt + bias σ × dt.
+#[test]
+fn the_imu_turn_on_bias_sigma_widens_the_initial_bias_prior() {
+    let s = scenario("smoke", Some(3.0));
+    let flight = Flight::new(&s).unwrap();
+    let rot_sigma = |gyro_bias_sigma_radps: f64| {
+        let mut vc = flight.vehicle_config();
+        vc.profile = FilterProfile::Eskf;
+        vc.imu.gyro_bias_sigma_radps = gyro_bias_sigma_radps;
+        let mut est = Estimator::new(&vc, EstimatorParams::default(), Some(flight.origin()));
+        for smp in flight.imu().iter().take(400) {
+            est.push_imu(smp).unwrap();
+        }
+        let t = flight.imu()[399].t_ns;
+        est.motion_prior(t - 100_000_000, t).rot_sigma_rad
+    };
+    let floor = EstimatorParams::default().init_gyro_bias_sigma_radps;
+    let base = rot_sigma(0.0);
+    assert!(base > 0.0);
+    assert_eq!(
+        rot_sigma(floor / 10.0),
+        base,
+        "below the default: the default"
+    );
+    let wide = rot_sigma(10.0 * floor);
+    assert!(
+        ((wide - base) - 9.0 * floor * 0.1).abs() < 1e-12,
+        "{wide} vs {base}"
+    );
+}
+
 #[test]
 fn motion_prior_matches_truth() {
     let s = scenario("smoke", Some(10.0));

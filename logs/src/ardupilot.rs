@@ -564,6 +564,9 @@ fn config(
         gyro_random_walk: 4e-5,
         accel_noise_density: acc_pn / rate_hz.sqrt(),
         accel_random_walk: 1e-3,
+        // Not in the log (ArduPilot calibrates the gyros at boot): the estimator's default.
+        gyro_bias_sigma_radps: 0.0,
+        accel_bias_sigma_mps2: 0.0,
     };
     VehicleConfig {
         imu: imu_cfg,

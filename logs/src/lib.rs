@@ -302,6 +302,9 @@ pub(crate) fn mems_config(
             gyro_random_walk: 4e-5,
             accel_noise_density: 3.5e-2,
             accel_random_walk: 1e-3,
+            // Not in the log: the estimator's default.
+            gyro_bias_sigma_radps: 0.0,
+            accel_bias_sigma_mps2: 0.0,
         },
         ..sensor_configs(gnss, mag, baro, delay_s)
     }

@@ -82,9 +82,10 @@ proptest! {
     #[test]
     fn vehicle_config_round_trip(k in prop::array::uniform4(-0.5f64..0.5), rpy in prop::array::uniform3(-3.0f64..3.0),
                                  t in prop::array::uniform3(-10.0f64..10.0), lever in prop::array::uniform3(-10.0f64..10.0),
-                                 terrain in -400.0f64..5000.0, paper in any::<bool>()) {
+                                 terrain in -400.0f64..5000.0, paper in any::<bool>(),
+                                 gyro_bias in 0.0f64..0.1, accel_bias in 0.0f64..1.0) {
         let c = VehicleConfig {
-            imu: ImuConfig::TACTICAL_MEMS,
+            imu: ImuConfig { gyro_bias_sigma_radps: gyro_bias, accel_bias_sigma_mps2: accel_bias, ..ImuConfig::TACTICAL_MEMS },
             gnss: Some(GnssConfig { rate_hz: 5.0, lever_arm_body_m: Vector3::from(lever), delay_ns: 0, altitude_reference: if paper { uavnav_core::AltitudeReference::Msl } else { uavnav_core::AltitudeReference::Ellipsoid } }),
             mag: None,
             baro: None,

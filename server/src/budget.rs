@@ -12,8 +12,9 @@
 //!     + (workers + vision.queue) × max_image_bytes
 //!       + workers × decode_per_pixel × max_camera_pixels               (vision jobs)
 //!     + record.queue_bytes                                             (recorder, when on)
-//!     + grpc.max_connections × max_streams_per_connection × 2 × max_message_bytes
-//!                                                                      (gRPC messages arriving)
+//!     + grpc.arrival_bytes                                            (gRPC messages arriving)
+//!     + grpc.max_connections × (connection_window
+//!                               + max_streams_per_connection × grpc_stream)   (gRPC connections)
 //!     + http.max_connections × http_connection
 //!     + zenoh_links × zenoh_link                                       (Zenoh, when on)
 //! ```
@@ -44,6 +45,16 @@ pub const DECODE_BYTES_PER_PIXEL: u64 = 8;
 
 /// One HTTP connection (headers, a small body, hyper's buffers).
 pub const HTTP_CONNECTION_BYTES: u64 = 256 << 10;
+
+/// HTTP/2 receive window of a gRPC connection and of each of its streams, bytes (set on the
+/// server rather than left to hyper's default, which is the same 1 MiB): what a connection's
+/// peer may send before the service reads it.
+pub const GRPC_CONNECTION_WINDOW: u32 = 1 << 20;
+
+/// One open gRPC stream besides its arriving messages: tonic's 8 KiB codec buffers each way,
+/// HTTP/2 stream state, and up to hyper's 400 KB per-stream send buffer for a peer that stops
+/// reading a response stream (acknowledgements, watched poses).
+pub const GRPC_STREAM_BYTES: u64 = 448 << 10;
 
 /// Zenoh transports the session accepts (its `transport/unicast/max_sessions` default).
 pub const ZENOH_LINKS: u64 = 1000;
@@ -113,13 +124,17 @@ impl MemoryBudget {
             },
             Term {
                 what: "gRPC messages arriving",
-                bound_by: "grpc.max_connections, grpc.max_streams_per_connection, grpc.max_message_bytes",
-                // tonic keeps each stream's receive buffer at the largest message it took, and
-                // a compressed message's decompressed copy beside it.
+                bound_by: "grpc.arrival_bytes",
+                // Every stream holds its largest message's buffers from one shared budget
+                // (transport::arrivals).
+                bytes: g.arrival_bytes,
+            },
+            Term {
+                what: "gRPC connections",
+                bound_by: "grpc.max_connections, grpc.max_streams_per_connection",
                 bytes: u(g.max_connections)
-                    * u64::from(g.max_streams_per_connection)
-                    * 2
-                    * u(g.max_message_bytes),
+                    * (u64::from(GRPC_CONNECTION_WINDOW)
+                        + u64::from(g.max_streams_per_connection) * GRPC_STREAM_BYTES),
             },
             Term {
                 what: "HTTP connections",
@@ -147,16 +162,6 @@ impl MemoryBudget {
     /// The sum, bytes.
     pub fn total(&self) -> u64 {
         self.terms.iter().map(|t| t.bytes).sum()
-    }
-
-    /// The budget without the gRPC term: what the service can hold when no caller has messages
-    /// in flight (the attacks of the memory benchmark end their messages).
-    pub fn without_grpc_arrivals(&self) -> u64 {
-        self.terms
-            .iter()
-            .filter(|t| t.what != "gRPC messages arriving")
-            .map(|t| t.bytes)
-            .sum()
     }
 }
 
@@ -193,7 +198,12 @@ mod tests {
         c.zenoh.enabled = true;
         let with_zenoh = MemoryBudget::of(&c);
         assert!(with_zenoh.terms.iter().any(|t| t.what == "Zenoh links"));
-        assert!(with_zenoh.without_grpc_arrivals() < with_zenoh.total());
+        c.grpc.arrival_bytes /= 2;
+        assert!(MemoryBudget::of(&c).total() < with_zenoh.total());
+        c.grpc.max_streams_per_connection /= 2;
+        let fewer_streams = MemoryBudget::of(&c).total();
+        c.grpc.max_connections /= 2;
+        assert!(MemoryBudget::of(&c).total() < fewer_streams);
         assert!(with_zenoh.to_string().contains("worst case in all"));
     }
 }

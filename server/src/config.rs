@@ -173,9 +173,13 @@ pub struct GrpcConfig {
     /// A ping not answered within this closes the connection (a link that died without a
     /// reset), s.
     pub keepalive_timeout_s: f64,
-    /// Streams one connection may have open at once (HTTP/2 `max_concurrent_streams`): each
-    /// may hold one message of up to `max_message_bytes` while it arrives.
+    /// Streams one connection may have open at once (HTTP/2 `max_concurrent_streams`).
     pub max_streams_per_connection: u32,
+    /// Bytes all streams' arriving messages may hold together (receive buffers and decoded
+    /// copies: twice a message's length, plus `2 × max_message_bytes` for a compressed one). A
+    /// message that does not fit ends its stream with RESOURCE_EXHAUSTED
+    /// ([`crate::transport::arrivals`]). At least `3 × max_message_bytes`.
+    pub arrival_bytes: u64,
 }
 
 impl Default for GrpcConfig {
@@ -190,6 +194,7 @@ impl Default for GrpcConfig {
             keepalive_interval_s: 20.0,
             keepalive_timeout_s: 20.0,
             max_streams_per_connection: 32,
+            arrival_bytes: 1 << 30,
         }
     }
 }
@@ -640,6 +645,11 @@ impl Config {
             );
         }
         let g = &self.grpc;
+        if g.arrival_bytes < 3 * g.max_message_bytes as u64 {
+            return bad(
+                "grpc.arrival_bytes must be at least 3 × grpc.max_message_bytes (one compressed message of the largest size)",
+            );
+        }
         let seconds = |x: f64| x.is_finite() && x > 0.0 && x <= 86_400.0;
         if g.max_connections == 0
             || self.http.max_connections == 0

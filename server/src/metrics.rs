@@ -282,6 +282,8 @@ pub struct Metrics {
     pub security: crate::security::SecurityMetrics,
     /// Connections open, refused and closed, by listener.
     pub connections: crate::transport::conn::ConnectionMetrics,
+    /// The gRPC arrival budget: bytes held, streams refused.
+    pub arrivals: crate::transport::arrivals::ArrivalMetrics,
 }
 
 impl Metrics {
@@ -438,6 +440,7 @@ impl Metrics {
         );
         let security = crate::security::SecurityMetrics::register(&mut registry);
         let connections = crate::transport::conn::ConnectionMetrics::register(&mut registry);
+        let arrivals = crate::transport::arrivals::ArrivalMetrics::register(&mut registry);
         let imu_clipped = Counter::default();
         registry.register(
             "imu_clipped",
@@ -481,6 +484,7 @@ impl Metrics {
             imu_clipped,
             security,
             connections,
+            arrivals,
             admission_evictions,
         }
     }

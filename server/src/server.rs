@@ -23,6 +23,7 @@ use crate::output::record::Recorder;
 use crate::security::tls::{Alpn, CertStore};
 use crate::security::{Authorizer, exposure};
 use crate::service::Service;
+use crate::transport::arrivals::{ArrivalBudget, ArrivalLayer};
 use crate::transport::conn::{self, ConnLimits, ListenerKind, TlsSide};
 use crate::transport::grpc::{UavNavService, remap_transport_status};
 use crate::transport::http::{HttpState, router};
@@ -261,6 +262,11 @@ async fn serve_grpc(
     let max = config.grpc.max_message_bytes;
     let tls_failures = service.metrics().security.tls_failures.clone();
     let conn_metrics = service.metrics().connections.clone();
+    let arrivals = Arc::new(ArrivalBudget::new(
+        config.grpc.arrival_bytes,
+        max as u64,
+        service.metrics().arrivals.clone(),
+    ));
     let uavnav = UavNavServer::new(UavNavService::new(service, config.grpc.ack_buffer))
         .max_decoding_message_size(max)
         .max_encoding_message_size(max)
@@ -283,11 +289,15 @@ async fn serve_grpc(
     });
     let mut router = tonic::transport::Server::builder()
         .max_concurrent_streams(Some(config.grpc.max_streams_per_connection))
+        // Stated, not left to hyper's defaults: the memory budget counts them per connection.
+        .initial_connection_window_size(crate::budget::GRPC_CONNECTION_WINDOW)
+        .initial_stream_window_size(crate::budget::GRPC_CONNECTION_WINDOW)
         .http2_keepalive_interval(keepalive.map(|k| k.0))
         .http2_keepalive_timeout(keepalive.map(|k| k.1))
         .layer(axum::middleware::map_response(
             remap_transport_status::<tonic::body::Body>,
         ))
+        .layer(ArrivalLayer::new(arrivals))
         .add_service(uavnav)
         .add_service(health_service);
     if config.grpc.reflection {

@@ -569,6 +569,14 @@ async fn implausible_configurations_name_the_field() {
             Box::new(|c| c.imu.as_mut().unwrap().rate_hz = 1e-300),
         ),
         (
+            "config.imu.gyro_bias_sigma_radps",
+            Box::new(|c| c.imu.as_mut().unwrap().gyro_bias_sigma_radps = -1e-3),
+        ),
+        (
+            "config.imu.accel_bias_sigma_mps2",
+            Box::new(|c| c.imu.as_mut().unwrap().accel_bias_sigma_mps2 = f64::NAN),
+        ),
+        (
             "config.gnss.rate_hz",
             Box::new(|c| c.gnss.as_mut().unwrap().rate_hz = 1e9),
         ),

@@ -192,6 +192,8 @@ impl Flight {
                 gyro_random_walk: s.imu.gyro_random_walk,
                 accel_noise_density: s.imu.accel_noise_density,
                 accel_random_walk: s.imu.accel_random_walk,
+                gyro_bias_sigma_radps: s.imu.gyro_bias_sigma_radps,
+                accel_bias_sigma_mps2: s.imu.accel_bias_sigma_mps2,
             },
             gnss: s.gnss.enabled.then(|| GnssConfig {
                 rate_hz: s.gnss.rate_hz,

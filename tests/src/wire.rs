@@ -84,6 +84,7 @@ pub fn vehicle_config(camera: bool) -> pb::VehicleConfig {
             gyro_random_walk: 2e-6,
             accel_noise_density: 1e-3,
             accel_random_walk: 1e-4,
+            ..Default::default()
         }),
         gnss: Some(pb::GnssConfig {
             rate_hz: 5.0,

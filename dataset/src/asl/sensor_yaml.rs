@@ -94,17 +94,54 @@ pub fn read_imu(path: &Path) -> Result<ImuConfig> {
         gyro_random_walk: y.f64("gyroscope_random_walk")?,
         accel_noise_density: y.f64("accelerometer_noise_density")?,
         accel_random_walk: y.f64("accelerometer_random_walk")?,
+        gyro_bias_sigma_radps: optional_non_negative(&y, GYRO_BIAS_KEY)?,
+        accel_bias_sigma_mps2: optional_non_negative(&y, ACCEL_BIAS_KEY)?,
     })
+}
+
+/// Optional `imu0/sensor.yaml` keys (not in EuRoC/Kalibr): the turn-on biases' 1-σ.
+const GYRO_BIAS_KEY: &str = "gyroscope_turn_on_bias_sigma";
+const ACCEL_BIAS_KEY: &str = "accelerometer_turn_on_bias_sigma";
+
+/// An optional key's value, ≥ 0 and finite; 0 when absent.
+fn optional_non_negative(y: &Yaml, key: &str) -> Result<f64> {
+    let Some(node) = y.get(key) else {
+        return Ok(0.0);
+    };
+    let v = y.f64(key)?;
+    if v.is_finite() && v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(DatasetError::parse(
+            y.path(),
+            node.line,
+            format!("`{key}` must be finite and >= 0, found {v}"),
+        ))
+    }
 }
 
 /// `imu0/sensor.yaml` text.
 pub fn write_imu(c: &ImuConfig) -> String {
+    // The turn-on biases only when known, so files of IMUs without them stay as they were.
+    let mut biases = String::new();
+    if c.gyro_bias_sigma_radps > 0.0 {
+        biases += &format!(
+            "{GYRO_BIAS_KEY}: {}   # [ rad / s ]\n",
+            fmt_f64(c.gyro_bias_sigma_radps)
+        );
+    }
+    if c.accel_bias_sigma_mps2 > 0.0 {
+        biases += &format!(
+            "{ACCEL_BIAS_KEY}: {}   # [ m / s^2 ]\n",
+            fmt_f64(c.accel_bias_sigma_mps2)
+        );
+    }
     format!(
         "%YAML:1.0\nsensor_type: imu\ncomment: written by uavnav\n{}rate_hz: {}\n\
          gyroscope_noise_density: {}     # [ rad / s / sqrt(Hz) ]\n\
          gyroscope_random_walk: {}       # [ rad / s^2 / sqrt(Hz) ]\n\
          accelerometer_noise_density: {} # [ m / s^2 / sqrt(Hz) ]\n\
-         accelerometer_random_walk: {}   # [ m / s^3 / sqrt(Hz) ]\n",
+         accelerometer_random_walk: {}   # [ m / s^3 / sqrt(Hz) ]\n{biases}",
         write_t_bs(&Isometry3::identity()),
         fmt_f64(c.rate_hz),
         fmt_f64(c.gyro_noise_density),

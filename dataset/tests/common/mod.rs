@@ -16,7 +16,12 @@ use uavnav_dataset::AslWriter;
 
 pub fn config() -> VehicleConfig {
     VehicleConfig {
-        imu: ImuConfig::TACTICAL_MEMS,
+        // Turn-on biases given, so that the optional keys take part in the round trip.
+        imu: ImuConfig {
+            gyro_bias_sigma_radps: 5e-3,
+            accel_bias_sigma_mps2: 0.2,
+            ..ImuConfig::TACTICAL_MEMS
+        },
         gnss: Some(GnssConfig {
             rate_hz: 5.0,
             lever_arm_body_m: Vector3::new(0.0, 2.0, 0.0),

@@ -152,8 +152,16 @@ pub fn interp(a: &ImuSample, b: &ImuSample, t_ns: i64) -> ImuSample {
 
 impl Eskf {
     /// A filter for one vehicle; `origin` fixes the local frame (else the first GNSS fix does).
-    pub fn new(config: &VehicleConfig, params: EstimatorParams, origin: Option<Lla>) -> Self {
+    pub fn new(config: &VehicleConfig, mut params: EstimatorParams, origin: Option<Lla>) -> Self {
         let imu = &config.imu;
+        // The IMU's own turn-on bias σ, where it says its biases are larger than the default
+        // prior (a consumer-grade IMU); the default stays a floor for calibration residuals.
+        params.init_gyro_bias_sigma_radps = params
+            .init_gyro_bias_sigma_radps
+            .max(imu.gyro_bias_sigma_radps);
+        params.init_accel_bias_sigma_mps2 = params
+            .init_accel_bias_sigma_mps2
+            .max(imu.accel_bias_sigma_mps2);
         let noise = ProcessNoise {
             gyro_psd: imu.gyro_noise_density.powi(2),
             accel_psd: imu.accel_noise_density.powi(2),

@@ -9,8 +9,9 @@ use nalgebra::Vector3;
 
 use super::geometry::{isometry, required_quaternion, required_vector3};
 use super::limits::{
-    AIDING_RATE_HZ, FOCAL_RANGE_PX, IMU_RATE_HZ, MAX_ACCEL_NOISE_DENSITY, MAX_ACCEL_RANDOM_WALK,
-    MAX_DISTORTION_COEFF, MAX_GYRO_NOISE_DENSITY, MAX_GYRO_RANDOM_WALK, MAX_OFFSET_M,
+    AIDING_RATE_HZ, FOCAL_RANGE_PX, IMU_RATE_HZ, MAX_ACCEL_BIAS_SIGMA_MPS2,
+    MAX_ACCEL_NOISE_DENSITY, MAX_ACCEL_RANDOM_WALK, MAX_DISTORTION_COEFF,
+    MAX_GYRO_BIAS_SIGMA_RADPS, MAX_GYRO_NOISE_DENSITY, MAX_GYRO_RANDOM_WALK, MAX_OFFSET_M,
 };
 use super::{ConvertError, in_range, positive, required};
 use crate::v1;
@@ -59,6 +60,16 @@ impl TryFrom<&v1::ImuConfig> for ImuConfig {
                 c.accel_random_walk,
                 MAX_ACCEL_RANDOM_WALK,
             )?,
+            gyro_bias_sigma_radps: noise(
+                "gyro_bias_sigma_radps",
+                c.gyro_bias_sigma_radps,
+                MAX_GYRO_BIAS_SIGMA_RADPS,
+            )?,
+            accel_bias_sigma_mps2: noise(
+                "accel_bias_sigma_mps2",
+                c.accel_bias_sigma_mps2,
+                MAX_ACCEL_BIAS_SIGMA_MPS2,
+            )?,
         })
     }
 }
@@ -71,6 +82,8 @@ impl From<&ImuConfig> for v1::ImuConfig {
             gyro_random_walk: c.gyro_random_walk,
             accel_noise_density: c.accel_noise_density,
             accel_random_walk: c.accel_random_walk,
+            gyro_bias_sigma_radps: c.gyro_bias_sigma_radps,
+            accel_bias_sigma_mps2: c.accel_bias_sigma_mps2,
         }
     }
 }

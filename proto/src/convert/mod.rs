@@ -67,6 +67,10 @@ pub mod limits {
     pub const MAX_ACCEL_NOISE_DENSITY: f64 = 10.0;
     /// Largest accelerometer bias random walk, m/s³/√Hz (MEMS: 1e-5–1e-2).
     pub const MAX_ACCEL_RANDOM_WALK: f64 = 1.0;
+    /// Largest turn-on gyro bias σ, rad/s (about 10 °/s: uncalibrated MEMS reach a few °/s).
+    pub const MAX_GYRO_BIAS_SIGMA_RADPS: f64 = 0.2;
+    /// Largest turn-on accelerometer bias σ, m/s² (MEMS: 0.01–0.5).
+    pub const MAX_ACCEL_BIAS_SIGMA_MPS2: f64 = 2.0;
     /// Largest component of a sensor's offset from the IMU (GNSS lever arm, camera mount), m.
     pub const MAX_OFFSET_M: f64 = 100.0;
     /// Accepted focal lengths, px.

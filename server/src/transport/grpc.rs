@@ -115,6 +115,10 @@ fn stream_cause(s: &Status) -> Option<Cause> {
             Some(Cause::Compression)
         }
         tonic::Code::InvalidArgument => Some(Cause::Malformed),
+        // The shared budget of arriving messages (a limit of the service, not of this message).
+        tonic::Code::ResourceExhausted if msg.starts_with("grpc.arrival_bytes") => {
+            Some(Cause::Exhausted)
+        }
         // Oversize, on the wire or once decompressed.
         tonic::Code::ResourceExhausted => Some(Cause::TooLarge),
         // Protocol errors (a compressed flag without an encoding, an unknown encoding...).

@@ -3,12 +3,14 @@
 //!
 //! | file | adapter |
 //! |---|---|
+//! | [`arrivals`] | one byte budget for the gRPC messages arriving on all streams (`grpc.arrival_bytes`) |
 //! | [`conn`] | every TCP listener's accept loop: connection limits, idle timeout, TLS handshakes, the file-descriptor budget |
 //! | [`grpc`] | the tonic `uavnav.v1.UavNav` service |
 //! | [`http`] | `/metrics`, `/livez`, `/readyz` |
 //! | [`zenoh`] | the embedded Zenoh session: inputs, outputs, queryables, liveliness |
 //! | [`zenoh_stats`] | what Zenoh dropped on congested links, read from its runtime into `/metrics` |
 
+pub mod arrivals;
 pub mod conn;
 pub mod grpc;
 pub mod http;
