@@ -3,8 +3,11 @@
 //! Over gRPC the acks of a vehicle's data say `needs_config` when the service runs it without the
 //! configuration this client gave (a restarted service, an idle eviction), and the ingest driver
 //! sends it again. Over Zenoh the same fact comes in the vehicle's health reports
-//! (`VehicleHealth.configured`). The keeper of an ingest stream subscribes to the health of every
-//! vehicle the stream feeds (from its first message on) and re-puts the remembered configuration
+//! (`VehicleHealth.configured`), which the service also publishes on the vehicle's `unconfigured`
+//! key while it runs without a configuration, and only then. The keeper of an ingest stream
+//! subscribes to that key of every vehicle the stream feeds (from its first message on): the
+//! service publishes nothing there for configured vehicles, where a subscription to `health`
+//! made it publish every vehicle's health every period. It re-puts the remembered configuration
 //! when a report says the vehicle runs without one: at most once per [`MIN_RESEND_INTERVAL`] per
 //! vehicle (a report comes every health period until the configuration arrives), counted in
 //! [`IngestStats::configs_resent`]. The keeper's task ends when the stream and every sender are
@@ -65,7 +68,7 @@ impl ConfigKeeper {
         self.configs.remember(id, config);
     }
 
-    /// Watches the health of vehicle `id` from now on. Called on a vehicle's first message of
+    /// Watches vehicle `id`'s `unconfigured` reports from now on. Called on a vehicle's first message of
     /// the stream (`IngestSender::await_subscriber`), so the channel sees each vehicle about once;
     /// the task ignores a vehicle it watches already.
     pub(crate) fn watch(&self, id: &str) {
@@ -90,7 +93,7 @@ async fn run(
                 if subscribers.contains_key(&id) {
                     continue;
                 }
-                let key = keys::vehicle_key(&id, Leaf::Health);
+                let key = keys::vehicle_key(&id, Leaf::Unconfigured);
                 let tx = unconfigured_tx.clone();
                 let sub = session
                     .declare_subscriber(&key)

@@ -11,6 +11,7 @@
 //! | `uavnav/v1/vehicle/{id}/config` | in | `uavnav.v1.VehicleConfig` |
 //! | `uavnav/v1/vehicle/{id}/pose` | out | `uavnav.v1.PoseEstimate` |
 //! | `uavnav/v1/vehicle/{id}/health` | out | `uavnav.v1.VehicleHealth` |
+//! | `uavnav/v1/vehicle/{id}/unconfigured` | out, only while the vehicle runs without its configuration | `uavnav.v1.VehicleHealth` |
 //! | `uavnav/v1/vehicle/{id}/pose/latest` | queryable | `uavnav.v1.PoseEstimate` |
 //! | `uavnav/v1/vehicles` | queryable | `uavnav.v1.ListVehiclesResponse` |
 //! | `uavnav/v1/service/{instance}` | liveliness token | — |
@@ -34,7 +35,7 @@ pub const SERVICE_PREFIX: &str = "uavnav/v1/service";
 /// Every key under every vehicle (inputs, outputs, queryables, liveliness).
 pub const ALL_VEHICLE_KEYS: &str = "uavnav/v1/vehicle/**";
 /// Every `{leaf}` of every vehicle (the service's input subscription; it also matches the
-/// `pose` and `health` outputs, which the service skips).
+/// outputs, which the service skips).
 pub const EVERY_VEHICLE_LEAF: &str = "uavnav/v1/vehicle/*/*";
 /// The latest-pose queryables of every vehicle.
 pub const EVERY_POSE_LATEST: &str = "uavnav/v1/vehicle/*/pose/latest";
@@ -68,6 +69,10 @@ pub enum Leaf {
     Pose,
     /// `uavnav.v1.VehicleHealth` output.
     Health,
+    /// `uavnav.v1.VehicleHealth` output, only the reports of a vehicle that runs without the
+    /// configuration a client gave (`configured: false`): what a sender's keeper subscribes to,
+    /// so that it makes the service publish nothing for configured vehicles.
+    Unconfigured,
 }
 
 impl Leaf {
@@ -82,7 +87,7 @@ impl Leaf {
     ];
 
     /// The output leaves (what the service publishes).
-    pub const OUTPUTS: [Leaf; 2] = [Leaf::Pose, Leaf::Health];
+    pub const OUTPUTS: [Leaf; 3] = [Leaf::Pose, Leaf::Health, Leaf::Unconfigured];
 
     /// The key chunk.
     pub fn as_str(self) -> &'static str {
@@ -95,6 +100,7 @@ impl Leaf {
             Leaf::Config => "config",
             Leaf::Pose => "pose",
             Leaf::Health => "health",
+            Leaf::Unconfigured => "unconfigured",
         }
     }
 
@@ -108,7 +114,7 @@ impl Leaf {
             Leaf::Camera => names::CAMERA_FRAME,
             Leaf::Config => names::VEHICLE_CONFIG,
             Leaf::Pose => names::POSE_ESTIMATE,
-            Leaf::Health => names::VEHICLE_HEALTH,
+            Leaf::Health | Leaf::Unconfigured => names::VEHICLE_HEALTH,
         }
     }
 
@@ -124,13 +130,13 @@ impl Leaf {
             Leaf::Baro => v1::BaroSample::decode(bytes).map(Payload::Baro),
             Leaf::Camera => v1::CameraFrame::decode(bytes).map(Payload::Camera),
             Leaf::Config => v1::VehicleConfig::decode(bytes).map(Payload::Config),
-            Leaf::Pose | Leaf::Health => return None,
+            Leaf::Pose | Leaf::Health | Leaf::Unconfigured => return None,
         })
     }
 
     /// Whether a sender publishes it (an input of the service).
     pub fn is_input(self) -> bool {
-        !matches!(self, Leaf::Pose | Leaf::Health)
+        !matches!(self, Leaf::Pose | Leaf::Health | Leaf::Unconfigured)
     }
 
     /// Parses a key chunk.
@@ -144,6 +150,7 @@ impl Leaf {
             "config" => Leaf::Config,
             "pose" => Leaf::Pose,
             "health" => Leaf::Health,
+            "unconfigured" => Leaf::Unconfigured,
             _ => return None,
         })
     }
@@ -203,7 +210,7 @@ pub fn split(key: &str) -> Option<(&str, Leaf)> {
 mod tests {
     use super::*;
 
-    const ALL: [Leaf; 8] = [
+    const ALL: [Leaf; 9] = [
         Leaf::Imu,
         Leaf::Gnss,
         Leaf::Mag,
@@ -212,6 +219,7 @@ mod tests {
         Leaf::Config,
         Leaf::Pose,
         Leaf::Health,
+        Leaf::Unconfigured,
     ];
 
     /// The wire contract: these strings are what deployed senders and ground stations use.
@@ -233,7 +241,15 @@ mod tests {
         assert_eq!(
             chunks,
             [
-                "imu", "gnss", "mag", "baro", "camera", "config", "pose", "health"
+                "imu",
+                "gnss",
+                "mag",
+                "baro",
+                "camera",
+                "config",
+                "pose",
+                "health",
+                "unconfigured"
             ]
         );
         assert_eq!(Leaf::Camera.message_name(), "uavnav.v1.CameraFrame");

@@ -66,6 +66,50 @@ async fn health_says_when_a_vehicle_lost_its_configuration() {
     server.shutdown().await.unwrap();
 }
 
+/// The `unconfigured` key carries a vehicle's health reports while it runs without its
+/// configuration, and nothing once it has one: a sender's keeper subscribes there, so the service
+/// publishes nothing for the configured vehicles it feeds.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn unconfigured_reports_come_only_while_a_vehicle_lacks_its_configuration() {
+    let mut cfg = test_config();
+    let endpoint = listen_zenoh(&mut cfg);
+    let server = start(cfg).await;
+    let z = zenoh_peer(&endpoint).await;
+    let key = |leaf: Leaf| keys::vehicle_key("lost", leaf);
+    let reports = z.declare_subscriber(key(Leaf::Unconfigured)).await.unwrap();
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let put_imu = |t: i64| {
+        let batch = pb::ImuBatch {
+            samples: vec![imu(t)],
+        };
+        z.put(key(Leaf::Imu), batch.encode_to_vec())
+            .encoding(enc("uavnav.v1.ImuBatch"))
+    };
+    put_imu(1_000_000_000).await.unwrap();
+    let s = tokio::time::timeout(Duration::from_secs(5), reports.recv_async())
+        .await
+        .expect("an unconfigured report over zenoh")
+        .unwrap();
+    let h = pb::VehicleHealth::decode(&*s.payload().to_bytes()).unwrap();
+    assert_eq!((h.vehicle_id.as_str(), h.configured), ("lost", false));
+    z.put(key(Leaf::Config), vehicle_config(false).encode_to_vec())
+        .encoding(enc("uavnav.v1.VehicleConfig"))
+        .await
+        .unwrap();
+    // Reports already on their way may still come; then none, over ten health periods.
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    while reports.try_recv().ok().flatten().is_some() {}
+    for k in 1..=10 {
+        put_imu(1_000_000_000 + k * 5_000_000).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    assert!(
+        reports.try_recv().ok().flatten().is_none(),
+        "a configured vehicle's report on the unconfigured key"
+    );
+    server.shutdown().await.unwrap();
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn zenoh_round_trip() {
     let mut cfg = test_config();

@@ -120,9 +120,19 @@ pub fn acl_json5(sec: &SecurityConfig) -> String {
             }
             if g.verbs.contains(&Verb::Configure) {
                 add("configure", &["put"], "ingress", vec![leaf(Leaf::Config)]);
+                // Who configures may learn that a vehicle lost its configuration (the client
+                // library's keeper re-puts it).
+                let unconfigured = vec![leaf(Leaf::Unconfigured)];
+                add(
+                    "unconfigured-in",
+                    &["declare_subscriber"],
+                    "ingress",
+                    unconfigured.clone(),
+                );
+                add("unconfigured-out", &["put"], "egress", unconfigured);
             }
             if g.verbs.contains(&Verb::Watch) {
-                let outputs = vec![leaf(Leaf::Pose), leaf(Leaf::Health)];
+                let outputs = Leaf::OUTPUTS.map(leaf).to_vec();
                 let latest = keys::pose_latest_key(&fleet);
                 let alive = keys::alive_key(&fleet);
                 add(

@@ -1,7 +1,8 @@
 //! The embedded Zenoh session: the same actors as gRPC, fed and watched through key expressions.
 //!
 //! The key expressions are those of [`uavnav_proto::keys`] (the table is there): the service
-//! subscribes to every vehicle's input leaves, publishes `pose` and `health`, answers the
+//! subscribes to every vehicle's input leaves, publishes `pose`, `health` and `unconfigured` (the
+//! health reports of a vehicle without its configuration, for senders' keepers), answers the
 //! `pose/latest` and `vehicles` queryables and declares the liveliness tokens.
 //!
 //! Payloads are the protobuf encoding of the message, with Zenoh encoding `application/protobuf`
@@ -43,7 +44,7 @@ fn input_kind(leaf: Leaf) -> Option<Kind> {
         Leaf::Baro => Kind::Baro,
         Leaf::Camera => Kind::Camera,
         Leaf::Config => Kind::Config,
-        Leaf::Pose | Leaf::Health => return None,
+        Leaf::Pose | Leaf::Health | Leaf::Unconfigured => return None,
     })
 }
 
@@ -276,7 +277,7 @@ async fn decode_loop(
             debug!(key = ?sample.key_expr().as_str(), "zenoh put on an unknown key");
             continue;
         };
-        // Our own outputs match `*/*` too (pose, health): not inputs.
+        // Our own outputs match `*/*` too (pose, health, unconfigured): not inputs.
         let Some(kind) = input_kind(leaf) else {
             continue;
         };
@@ -485,6 +486,7 @@ async fn publish_outputs(
     let metrics = ingestor.registry().ctx().metrics.clone();
     let watched = Subscribers::declare(&session, Leaf::Pose).await;
     let health_watched = Subscribers::declare(&session, Leaf::Health).await;
+    let unconfigured_watched = Subscribers::declare(&session, Leaf::Unconfigured).await;
     let out = Outputs {
         session,
         pose_enc: encoding(Leaf::Pose.message_name()),
@@ -494,8 +496,14 @@ async fn publish_outputs(
         tokio::select! {
             biased;
             r = health.recv() => match r {
-                Ok(h) if health_watched.any() => out.health(&h).await,
-                Ok(_) => {}
+                Ok(h) => {
+                    if health_watched.any() {
+                        out.health(&h, Leaf::Health).await;
+                    }
+                    if !h.configured && unconfigured_watched.any() {
+                        out.health(&h, Leaf::Unconfigured).await;
+                    }
+                }
                 Err(broadcast::error::RecvError::Lagged(n)) => {
                     metrics.zenoh_output_lagged.inc_by(n);
                 }
@@ -516,11 +524,12 @@ async fn publish_outputs(
         out.poses(&b).await;
     }
     while let Ok(h) = health.try_recv() {
-        out.health(&h).await;
+        out.health(&h, Leaf::Health).await;
     }
 }
 
-/// Whether any Zenoh subscriber anywhere matches some vehicle's output key (`pose` or `health`).
+/// Whether any Zenoh subscriber anywhere matches some vehicle's output key (`pose`, `health` or
+/// `unconfigured`).
 /// Poses come at IMU rate for the whole fleet: when nobody subscribes, encoding and routing each one
 /// would cost more than estimating it. Health comes at 1 Hz per vehicle, which for an idle fleet of
 /// 10,000 vehicles was most of a core spent routing reports nobody asked for: it is gated the same
@@ -595,9 +604,11 @@ impl Outputs {
         }
     }
 
-    async fn health(&self, h: &pb::VehicleHealth) {
+    /// A health report on `leaf` (`Health`, or `Unconfigured` for a vehicle without its
+    /// configuration).
+    async fn health(&self, h: &pb::VehicleHealth, leaf: Leaf) {
         self.put(
-            keys::vehicle_key(&h.vehicle_id, Leaf::Health),
+            keys::vehicle_key(&h.vehicle_id, leaf),
             h.encode_to_vec(),
             &self.health_enc,
         )
