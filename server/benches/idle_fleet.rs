@@ -7,6 +7,11 @@
 //! `--settle-s` (the vehicles' last reorder windows flushed, their first reports sent) the
 //! process's CPU time (utime + stime from `/proc/self/stat`; the idle client in the same process
 //! included) is read over `--quiet-s`. Target: at most 0.05 core for 10,000 vehicles.
+//!
+//! `--configure` sends each vehicle a configuration first. `--watch LEAF` adds what a sender's
+//! keeper does: a Zenoh peer subscribed to one vehicle's `LEAF` (`health`, or `unconfigured`,
+//! which the client library's keeper uses), which makes the service publish that leaf for the
+//! fleet whenever its reports are due.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use std::time::{Duration, Instant};
@@ -18,6 +23,8 @@ struct Args {
     vehicles: usize,
     settle_s: f64,
     quiet_s: f64,
+    configure: bool,
+    watch: Option<uavnav_proto::keys::Leaf>,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -25,6 +32,8 @@ fn parse_args() -> Result<Args, String> {
         vehicles: 10_000,
         settle_s: 15.0,
         quiet_s: 30.0,
+        configure: false,
+        watch: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -34,8 +43,21 @@ fn parse_args() -> Result<Args, String> {
             "--vehicles" => a.vehicles = val()?.parse().map_err(|e| format!("--vehicles: {e}"))?,
             "--settle-s" => a.settle_s = val()?.parse().map_err(|e| format!("--settle-s: {e}"))?,
             "--quiet-s" => a.quiet_s = val()?.parse().map_err(|e| format!("--quiet-s: {e}"))?,
+            "--configure" => a.configure = true,
+            "--watch" => {
+                let leaf = val()?;
+                a.watch = Some(
+                    uavnav_proto::keys::Leaf::parse(&leaf)
+                        .filter(|l| !l.is_input())
+                        .ok_or(format!("--watch: {leaf} is not an output leaf"))?,
+                );
+            }
             "--help" | "-h" => {
-                return Err("usage: idle_fleet [--vehicles N] [--settle-s S] [--quiet-s S]".into());
+                return Err(
+                    "usage: idle_fleet [--vehicles N] [--settle-s S] [--quiet-s S] \
+                     [--configure] [--watch health|unconfigured|pose]"
+                        .into(),
+                );
             }
             other => return Err(format!("unknown argument {other}")),
         }
@@ -75,15 +97,26 @@ fn main() {
         .unwrap();
     rt.block_on(async move {
         let mut cfg = uavnav_tests::service::loopback_config();
-        uavnav_tests::service::listen_zenoh(&mut cfg);
+        let endpoint = uavnav_tests::service::listen_zenoh(&mut cfg);
         let server = uavnavd::Server::start(cfg).await.unwrap();
         let mut client = UavNavClient::connect(format!("http://{}", server.grpc_addr))
             .await
             .unwrap();
-        let envs: Vec<_> = (0..args.vehicles)
-            .map(|v| pb::SensorEnvelope {
-                vehicle_id: format!("idle-{v}"),
-                sequence: v as u64,
+        let mut envs = Vec::new();
+        for v in 0..args.vehicles {
+            let vehicle_id = format!("idle-{v}");
+            if args.configure {
+                envs.push(pb::SensorEnvelope {
+                    vehicle_id: vehicle_id.clone(),
+                    sequence: envs.len() as u64,
+                    payload: Some(pb::sensor_envelope::Payload::Config(
+                        uavnav_tests::wire::vehicle_config(false),
+                    )),
+                });
+            }
+            envs.push(pb::SensorEnvelope {
+                vehicle_id,
+                sequence: envs.len() as u64,
                 payload: Some(pb::sensor_envelope::Payload::Imu(pb::ImuBatch {
                     samples: vec![pb::ImuSample {
                         t_ns: 1_000_000_000,
@@ -91,8 +124,23 @@ fn main() {
                         ..Default::default()
                     }],
                 })),
-            })
-            .collect();
+            });
+        }
+        // The keeper of one vehicle (kept open for the whole run).
+        let mut watcher = None;
+        if let Some(leaf) = args.watch {
+            let mut zc = zenoh::Config::default();
+            zc.insert_json5("mode", "\"peer\"").unwrap();
+            zc.insert_json5("listen/endpoints", "[]").unwrap();
+            zc.insert_json5("connect/endpoints", &format!("[\"{endpoint}\"]"))
+                .unwrap();
+            zc.insert_json5("scouting/multicast/enabled", "false")
+                .unwrap();
+            let z = zenoh::open(zc).await.unwrap();
+            let key = uavnav_proto::keys::vehicle_key("idle-0", leaf);
+            let sub = z.declare_subscriber(key).await.unwrap();
+            watcher = Some((z, sub));
+        }
         let n = envs.len();
         let mut acks = client
             .ingest(futures::stream::iter(envs))
@@ -113,9 +161,13 @@ fn main() {
         tokio::time::sleep(Duration::from_secs_f64(args.quiet_s)).await;
         let (cpu, wall) = (cpu_s() - c0, t0.elapsed().as_secs_f64());
         let reports = server.metrics().health_reports.get() - r0;
+        let received = watcher.as_ref().map_or(0, |(_, s)| s.drain().count());
         println!(
-            "idle fleet: {} vehicles, {:.2} s CPU in {:.1} s = {:.4} core, {:.0} health reports/s",
+            "idle fleet: {} vehicles{}{}, {:.2} s CPU in {:.1} s = {:.4} core, {:.0} health reports/s, \
+             {received} samples for the watched vehicle",
             args.vehicles,
+            if args.configure { ", configured" } else { "" },
+            args.watch.map(|l| format!(", one vehicle's {} watched", l.as_str())).unwrap_or_default(),
             cpu,
             wall,
             cpu / wall,
