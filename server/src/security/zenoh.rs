@@ -242,6 +242,16 @@ mod tests {
         };
         let acl = acl_json5(&sec);
         assert!(acl.contains("uavnav/v1/vehicle/alpha-$*/imu"), "{acl}");
+        // Who configures may learn a vehicle lost its configuration (the client keeper's key).
+        assert!(acl.contains("p0-g0-unconfigured-in"), "{acl}");
+        assert!(
+            acl.contains("uavnav/v1/vehicle/alpha-$*/unconfigured"),
+            "{acl}"
+        );
+        assert!(
+            !acl.contains("p1-g0-unconfigured-in"),
+            "ops may not configure: {acl}"
+        );
         let mut z = zenoh::Config::default();
         apply(&mut z, &sec).expect("zenoh accepts the generated access control");
         let text = format!("{z:?}");
