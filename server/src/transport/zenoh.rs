@@ -474,7 +474,8 @@ fn spawn_liveliness(
     })
 }
 
-/// Publishes every pose and health report on the vehicle's key until `done` fires, then publishes
+/// Publishes every pose and health report on the vehicle's key (and the reports of a vehicle
+/// without its configuration on its `unconfigured` key) until `done` fires, then publishes
 /// what is left in the rings (the final health reports) and ends.
 async fn publish_outputs(
     session: Session,
