@@ -257,13 +257,11 @@ impl HttpBody for BudgetedBody {
             Poll::Ready(Some(Ok(frame))) => frame,
             other => return other,
         };
-        if let Some(data) = frame.data_ref() {
-            // Bytes is a cheap handle: the clone lets `charge` borrow self mutably.
-            let data = data.clone();
-            if let Err(refusal) = self.charge(&data) {
-                self.failed = true;
-                return Poll::Ready(Some(Err(refusal)));
-            }
+        if let Some(data) = frame.data_ref()
+            && let Err(refusal) = self.charge(data)
+        {
+            self.failed = true;
+            return Poll::Ready(Some(Err(refusal)));
         }
         Poll::Ready(Some(Ok(frame)))
     }
