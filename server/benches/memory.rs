@@ -35,6 +35,21 @@ fn rss_bytes() -> u64 {
     pages * 4096
 }
 
+/// Resident memory split as `/proc/self/status` states it: anonymous (heap, stacks: what the
+/// service allocated) and file-backed (the binary's code and read-only data, paged in the first
+/// time a path runs and shared, clean, reclaimable), bytes.
+fn rss_split() -> (u64, u64) {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    let field = |name: &str| {
+        status
+            .lines()
+            .find_map(|l| l.strip_prefix(name))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+            .map_or(0, |kb| kb * 1024)
+    };
+    (field("RssAnon:"), field("RssFile:"))
+}
+
 fn mib(b: u64) -> f64 {
     b as f64 / f64::from(1u32 << 20)
 }
@@ -204,8 +219,20 @@ fn main() {
     attacks();
 }
 
-#[tokio::main(flavor = "multi_thread", worker_threads = 2)]
-async fn attacks() {
+fn attacks() {
+    // As `uavnavd` runs: its workers give back their free memory when they park
+    // (`uavnavd::allocator::collect_on_park`), unless `--no-collect` (to compare).
+    let mut b = tokio::runtime::Builder::new_multi_thread();
+    b.worker_threads(2).enable_all();
+    if !std::env::args().any(|a| a == "--no-collect") {
+        b.on_thread_park(|| {
+            uavnavd::allocator::collect_on_park();
+        });
+    }
+    b.build().unwrap().block_on(attacks_async());
+}
+
+async fn attacks_async() {
     let args: Vec<String> = std::env::args().collect();
     let ids = args
         .iter()
@@ -237,12 +264,28 @@ async fn attacks() {
     tokio::time::sleep(Duration::from_secs(2)).await;
     let sampler = Sampler::start();
     let baseline = rss_bytes();
-    println!("baseline: {:.1} MiB", mib(baseline));
-    println!("{:<44} {:>10} {:>10}", "attack", "peak MiB", "after MiB");
+    let (base_anon, base_file) = rss_split();
+    println!(
+        "baseline: {:.1} MiB (anonymous {:.1}, file-backed {:.1})",
+        mib(baseline),
+        mib(base_anon),
+        mib(base_file)
+    );
+    println!(
+        "{:<44} {:>10} {:>10} {:>10} {:>10}",
+        "attack", "peak MiB", "after MiB", "anon", "file"
+    );
     let mut worst = 0u64;
     let mut report = |what: &str, peak: u64, after: u64| {
         worst = worst.max(peak);
-        println!("{what:<44} {:>10.1} {:>10.1}", mib(peak), mib(after));
+        let (anon, file) = rss_split();
+        println!(
+            "{what:<44} {:>10.1} {:>10.1} {:>10.1} {:>10.1}",
+            mib(peak),
+            mib(after),
+            mib(anon),
+            mib(file)
+        );
     };
 
     if run(1) {
@@ -318,6 +361,15 @@ async fn attacks() {
         mib(after),
         mib(baseline),
         (after as f64 / baseline as f64 - 1.0) * 100.0
+    );
+    let (anon, file) = rss_split();
+    println!(
+        "after the attacks: anonymous {:.1} MiB against {:.1} MiB ({:+.0} %), file-backed {:.1} MiB against {:.1} MiB",
+        mib(anon),
+        mib(base_anon),
+        (anon as f64 / base_anon as f64 - 1.0) * 100.0,
+        mib(file),
+        mib(base_file)
     );
     drop(sampler);
     server.shutdown().await.unwrap();

@@ -15,7 +15,7 @@
 //! | [`transport::zenoh_stats`] | what Zenoh dropped on congested links, read from its runtime into `/metrics` |
 //! | [`transport::http`] | `/metrics`, `/livez`, `/readyz` |
 //! | [`ingest`] | the transport-neutral ingest path (validate, gate, route, count) |
-//! | [`allocator`] | the allocator options of a long-running service (the binaries re-execute once with them) |
+//! | [`allocator`] | the allocator options of a long-running service (the binaries re-execute once with them), and the collection of an idle worker's heap |
 //! | [`budget`] | the worst-case resident memory of a configuration (`--memory-budget`) |
 //! | [`ingest::validate`] | field-by-field input checks with precise statuses |
 //! | [`ingest::gate`] | the ingest time gate: late, duplicate, backwards, future, clock resync |
@@ -95,6 +95,9 @@ pub fn run() -> ExitCode {
     logging::init(&config.log);
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .enable_all()
+        .on_thread_park(|| {
+            allocator::collect_on_park();
+        })
         .build()
     {
         Ok(r) => r,
