@@ -115,9 +115,15 @@ mod tests {
             let _junk: Vec<Vec<u8>> = (0..1000).map(|i| vec![0u8; 100 + i]).collect();
             drop(_junk);
             assert!(collect_on_park(), "the first park collects");
-            assert!(!collect_on_park(), "a second park within the interval does not");
+            assert!(
+                !collect_on_park(),
+                "a second park within the interval does not"
+            );
             std::thread::sleep(COLLECT_INTERVAL);
-            assert!(collect_on_park(), "a park after the interval collects again");
+            assert!(
+                collect_on_park(),
+                "a park after the interval collects again"
+            );
         })
         .join()
         .unwrap();
