@@ -116,8 +116,18 @@ fn bench(c: &mut Criterion) {
         b.iter_batched(
             || (p0, GnssPosSource::default(), GnssVelSource::default()),
             |(mut p, mut sp, mut sv)| {
-                let a = sp.fuse(&x, &mut p, &lever, &m, &r, 3.29, 5_000_000_000);
-                let v = sv.fuse(&x, &mut p, &lever, &gyro, &w_ie, &m, 3.29, 5_000_000_000);
+                let a = sp.fuse(&x, &mut p, &lever, &m, &r, 3.29, 5_000_000_000, &[]);
+                let v = sv.fuse(
+                    &x,
+                    &mut p,
+                    &lever,
+                    &gyro,
+                    &w_ie,
+                    &m,
+                    3.29,
+                    5_000_000_000,
+                    &[],
+                );
                 std::hint::black_box((a, v, p))
             },
             BatchSize::SmallInput,

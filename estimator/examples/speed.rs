@@ -69,8 +69,18 @@ fn gnss_updates(flight: &Flight, repeats: usize) {
     for _ in 0..repeats * 100_000 {
         let mut p = std::hint::black_box(p0);
         let (mut sp, mut sv) = (GnssPosSource::default(), GnssVelSource::default());
-        let a = sp.fuse(&x, &mut p, &lever, &m, &r, 3.29, 5_000_000_000);
-        let v = sv.fuse(&x, &mut p, &lever, &gyro, &w_ie, &m, 3.29, 5_000_000_000);
+        let a = sp.fuse(&x, &mut p, &lever, &m, &r, 3.29, 5_000_000_000, &[]);
+        let v = sv.fuse(
+            &x,
+            &mut p,
+            &lever,
+            &gyro,
+            &w_ie,
+            &m,
+            3.29,
+            5_000_000_000,
+            &[],
+        );
         acc += a.map_or(0.0, |d| d[0]) + v.map_or(0.0, |d| d[3]) + p[(0, 0)];
     }
     println!("{} updates (checksum {acc:.3})", repeats * 100_000);

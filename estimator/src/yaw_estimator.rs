@@ -415,6 +415,13 @@ impl YawEstimator {
             .filter(|&(_, s)| s < self.params.converged_sigma_rad)
     }
 
+    /// Whether the recent accelerations are too small for the GNSS velocity to tell the heading
+    /// as well as the bank requires for convergence ([`Self::observability_sigma_rad`] above
+    /// `converged_sigma_rad`): a hover, or a straight line at constant speed.
+    pub fn heading_unobservable(&self) -> bool {
+        self.observability_sigma_rad() > self.params.converged_sigma_rad
+    }
+
     /// The σ a heading seen only through the GNSS velocity can honestly claim, rad: the converged
     /// bank's σ combined with what the recent accelerations cannot tell
     /// ([`Self::observability_sigma_rad`]). `None` while the bank has not converged.

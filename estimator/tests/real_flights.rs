@@ -111,14 +111,17 @@ fn copter_218_without_magnetometer() {
         return;
     };
     assert_eq!(s.bad_sigma_rows, 0, "{s}");
-    // Met: roll/pitch (1.35/1.01°), horizontal (0.53 m), never confidently wrong (100 % within
+    // Met: roll/pitch (1.34/1.01°), horizontal (0.53 m), never confidently wrong (100 % within
     // 3σ; 55 % before the yaw σ was floored at the yaw bank's spread). Not yet: yaw within 10°
-    // (12.7° RMSE against the autopilot's compass heading, which has its own ~4° error; 11.2°
-    // before the floor also covered what hover accelerations cannot tell).
+    // (11.4° RMSE against the autopilot's compass heading, which has its own ~4° error; 12.7°
+    // before GNSS stopped correcting the yaw while the accelerations cannot tell it,
+    // `Eskf::heading_unobservable_states`). What is left is mostly one hover (205–250 s) where
+    // the filter turns 17° against the gyro in 5 s while the accelerations are just above that
+    // threshold.
     assert!(s.rmse_deg[0] <= 1.5 && s.rmse_deg[1] <= 1.5, "{s}");
     assert!(s.horizontal_rmse_m <= 1.5, "{s}");
     assert!(s.yaw_within_3sigma >= 0.95, "{s}");
-    assert!(s.rmse_deg[2] <= 15.0, "{s}");
+    assert!(s.rmse_deg[2] <= 12.5, "{s}");
 }
 
 #[test]

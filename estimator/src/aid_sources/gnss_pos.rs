@@ -9,7 +9,7 @@
 use nalgebra::{Matrix3, SMatrix, Vector3};
 use uavnav_core::rotation::skew;
 
-use super::{InnovDiag, UpdateOutcome, gated_update};
+use super::{InnovDiag, UpdateOutcome, gated_update_considering};
 use crate::state::{Cov, ErrVec, IGM, IP, ITH, N, Nominal};
 
 /// One GNSS fix in the local frame.
@@ -159,6 +159,7 @@ impl GnssPosSource {
         r: &Matrix3<f64>,
         gate_sigma: f64,
         reset_timeout_ns: i64,
+        consider: &[usize],
     ) -> Option<ErrVec> {
         let (y, h) = model(x, lever_b, &meas.pos_ned_m);
         let stuck = self.diag.consecutive_rejects > 0
@@ -170,7 +171,17 @@ impl GnssPosSource {
             }
             self.resets += 1;
         }
-        match gated_update(p, &h, r, &y, gate_sigma, meas.t_ns, stuck, &mut self.diag) {
+        match gated_update_considering(
+            p,
+            &h,
+            r,
+            &y,
+            gate_sigma,
+            meas.t_ns,
+            stuck,
+            &mut self.diag,
+            consider,
+        ) {
             UpdateOutcome::Fused(dx) => Some(dx),
             _ => None,
         }

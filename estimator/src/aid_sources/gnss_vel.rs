@@ -9,7 +9,7 @@ use uavnav_core::rotation::skew;
 
 use super::gnss_consistency::{ConsistencyParams, VelConsistency};
 use super::gnss_pos::GnssMeas;
-use super::{InnovDiag, UpdateOutcome, gated_update};
+use super::{InnovDiag, UpdateOutcome, gated_update_considering};
 use crate::state::{Cov, ErrVec, IBG, ITH, IV, N, Nominal};
 
 /// Residual and Jacobian of the antenna velocity; `gyro_b` is the raw gyro (ω_ib) at the fix time.
@@ -75,6 +75,7 @@ impl GnssVelSource {
         meas: &GnssMeas,
         gate_sigma: f64,
         reset_timeout_ns: i64,
+        consider: &[usize],
     ) -> Option<ErrVec> {
         let v_meas = meas.vel_ned_mps?;
         let (y, h) = model(x, lever_b, gyro_b, w_ie, &v_meas);
@@ -88,7 +89,17 @@ impl GnssVelSource {
             }
             self.resets += 1;
         }
-        match gated_update(p, &h, &r, &y, gate_sigma, meas.t_ns, stuck, &mut self.diag) {
+        match gated_update_considering(
+            p,
+            &h,
+            &r,
+            &y,
+            gate_sigma,
+            meas.t_ns,
+            stuck,
+            &mut self.diag,
+            consider,
+        ) {
             UpdateOutcome::Fused(dx) => Some(dx),
             _ => None,
         }

@@ -104,6 +104,24 @@ pub fn gated_update<const M: usize>(
     force: bool,
     diag: &mut InnovDiag,
 ) -> UpdateOutcome {
+    gated_update_considering(p, h, r, y, gate_sigma, t_ns, force, diag, &[])
+}
+
+/// [`gated_update`], with the error states `consider` left uncorrected (a Schmidt update):
+/// used for a state the measurement cannot honestly tell (the heading seen through a hovering
+/// vehicle's velocity).
+#[allow(clippy::too_many_arguments)]
+pub fn gated_update_considering<const M: usize>(
+    p: &mut Cov,
+    h: &SMatrix<f64, M, N>,
+    r: &SMatrix<f64, M, M>,
+    y: &SVector<f64, M>,
+    gate_sigma: f64,
+    t_ns: i64,
+    force: bool,
+    diag: &mut InnovDiag,
+    consider: &[usize],
+) -> UpdateOutcome {
     let pht = p_ht(p, h);
     let s = h * pht + r;
     let Some(chol) = s.cholesky() else {
@@ -128,12 +146,81 @@ pub fn gated_update<const M: usize>(
     }
     // K = P Hᵀ S⁻¹  ⇔  Kᵀ = S⁻¹ H P.
     let kt = chol.solve(&pht.transpose());
-    let k = kt.transpose();
+    let mut k = kt.transpose();
+    if consider.is_empty() {
+        *p -= k * pht.transpose();
+    } else {
+        // Schmidt ("consider") update: the considered states keep their estimate, their
+        // uncertainty still shapes the gain of the others, and the covariance stays that of the
+        // gain actually applied (Joseph form, valid for any gain).
+        for &i in consider {
+            k.row_mut(i).fill(0.0);
+        }
+        let i_kh = Cov::identity() - k * h;
+        *p = i_kh * *p * i_kh.transpose() + k * r * k.transpose();
+    }
     let dx = k * y;
-    *p -= k * pht.transpose();
     symmetrize(p);
     diag.fused += 1;
     diag.consecutive_rejects = 0;
     diag.last_fused_t_ns = t_ns;
     UpdateOutcome::Fused(dx)
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Matrix3, Vector3};
+
+    use super::*;
+    use crate::state::{ITH, IV};
+
+    /// A covariance with the velocity correlated to the yaw (as after a manoeuvre), and a
+    /// velocity measurement.
+    fn setup() -> (Cov, SMatrix<f64, 3, N>, Matrix3<f64>, Vector3<f64>) {
+        let mut p = Cov::identity() * 0.04;
+        p[(ITH + 2, ITH + 2)] = 0.09;
+        p[(IV, ITH + 2)] = 0.03;
+        p[(ITH + 2, IV)] = 0.03;
+        let mut h = SMatrix::<f64, 3, N>::zeros();
+        for k in 0..3 {
+            h[(k, IV + k)] = 1.0;
+        }
+        (
+            p,
+            h,
+            Matrix3::identity() * 0.01,
+            Vector3::new(0.3, -0.1, 0.05),
+        )
+    }
+
+    fn fuse(consider: &[usize]) -> (ErrVec, Cov) {
+        let (mut p, h, r, y) = setup();
+        let mut diag = InnovDiag::new();
+        let UpdateOutcome::Fused(dx) =
+            gated_update_considering(&mut p, &h, &r, &y, 1e3, 0, false, &mut diag, consider)
+        else {
+            panic!("not fused")
+        };
+        (dx, p)
+    }
+
+    #[test]
+    fn a_considered_state_is_not_corrected_and_keeps_an_honest_covariance() {
+        let (dx_all, p_all) = fuse(&[]);
+        let (dx, p) = fuse(&[ITH + 2]);
+        assert!(dx_all[ITH + 2].abs() > 0.1, "the yaw is corrected normally");
+        assert_eq!(dx[ITH + 2], 0.0, "the considered yaw is not corrected");
+        // The other states get the same correction (their gain is the optimal one).
+        for i in (0..N).filter(|&i| i != ITH + 2) {
+            assert!((dx[i] - dx_all[i]).abs() < 1e-12, "state {i}");
+        }
+        // The yaw keeps its variance; the others shrink as in the optimal update; the result is
+        // symmetric positive definite.
+        assert!((p[(ITH + 2, ITH + 2)] - 0.09).abs() < 1e-12);
+        for i in (0..N).filter(|&i| i != ITH + 2) {
+            assert!((p[(i, i)] - p_all[(i, i)]).abs() < 1e-12, "state {i}");
+        }
+        assert!(p.cholesky().is_some());
+        assert!((p - p.transpose()).abs().max() < 1e-15);
+    }
 }

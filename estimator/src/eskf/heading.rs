@@ -102,6 +102,26 @@ impl Eskf {
         }
     }
 
+    /// The error states GNSS must not correct now: the yaw, when nothing but the GNSS velocity
+    /// sees the heading (no compass fused, no lever arm, no camera) and the vehicle has not
+    /// accelerated enough for it to tell the heading ([`YawEstimator::heading_unobservable`]).
+    /// Why: the yaw σ is then floored at what the velocity cannot tell (`floor_yaw_sigma`), and
+    /// with that σ a hovering copter's GNSS velocity, whose errors the linear model reads as
+    /// heading information, turned the heading the wrong way (copter_218 without its compass:
+    /// +9° in 5 s of hover while the gyro turned −8°, both references following the gyro). The
+    /// yaw is then held by the gyro until the vehicle manoeuvres; its σ keeps growing honestly.
+    ///
+    /// [`YawEstimator::heading_unobservable`]: crate::yaw_estimator::YawEstimator::heading_unobservable
+    pub(super) fn heading_unobservable_states(&self) -> &'static [usize] {
+        let mag_active = self.mag.state == MagState::Active && self.mag.diag.fused > 0;
+        let velocity_only = self.lever_b.norm() < 0.05 && self.body_from_cam.is_none();
+        if self.yaw_aligned && !mag_active && velocity_only && self.yaw_est.heading_unobservable() {
+            &[ITH + 2]
+        } else {
+            &[]
+        }
+    }
+
     /// The filter's yaw minus the bank's `(yaw, σ)` (wrapped), and the σ of that difference.
     fn disagreement_with(&self, (yaw, sigma): (f64, f64)) -> Option<(f64, f64)> {
         let (_, _, cur) = self.x.as_ref()?.q.euler_angles();

@@ -583,9 +583,10 @@ impl Eskf {
             self.params.gnss_pos_white_min_m,
         );
         let (gate, reset) = (self.params.gate_sigma, self.params.gnss_reset_timeout_ns);
+        let consider = self.heading_unobservable_states();
         let dx = self
             .gnss_pos
-            .fuse(&x, &mut self.p, &self.lever_b, m, &r, gate, reset);
+            .fuse(&x, &mut self.p, &self.lever_b, m, &r, gate, reset, consider);
         self.inject(dx);
         let Some(x) = self.x else { return };
         let dx = self.gnss_vel.fuse(
@@ -597,6 +598,7 @@ impl Eskf {
             m,
             gate,
             reset,
+            consider,
         );
         self.inject(dx);
     }
