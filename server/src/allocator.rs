@@ -71,9 +71,9 @@ pub const COLLECT_INTERVAL: std::time::Duration = std::time::Duration::from_secs
 ///
 /// Why: mimalloc keeps a thread's emptied pages, and the blocks other threads freed into it, until
 /// that thread allocates again — and an idle worker seldom does. After issue 19's attacks (`memory`
-/// bench, five attacks in turn, their vehicles evicted) the service stayed at 28.6–31.0 MiB
-/// against a 16.7–17.0 MiB baseline, 12–15 MiB of it anonymous; collecting on park: 22.5–25.3 MiB,
-/// 6.8–9.6 MiB anonymous. The cost: one call per second at most, 0.1 µs with 100 MB of small
+/// bench, five attacks in turn, their vehicles evicted) the service stayed at 28.1–31.0 MiB
+/// against a 16.7–17.2 MiB baseline, 12–15 MiB of it anonymous; collecting on park: 22.5–25.3 MiB,
+/// 7.0–9.6 MiB anonymous. The cost: one call per second at most, 0.1 µs with 100 MB of small
 /// blocks live on the thread (measured once, release build).
 pub fn collect_on_park() -> bool {
     use std::cell::Cell;

@@ -44,7 +44,7 @@ impl Eskf {
     /// Aligns an unknown heading from the yaw estimator (or the course when allowed), and resets
     /// an estimator-aligned heading that GNSS velocity keeps contradicting.
     pub(super) fn manage_heading(&mut self, m: &GnssMeas) {
-        let mag_active = self.mag.state == MagState::Active && self.mag.diag.fused > 0;
+        let mag_active = self.mag_fusing();
         let gsf = self.yaw_est.converged_yaw();
         if !self.yaw_aligned {
             if let (Some((yaw, sigma)), Some(x)) = (gsf, self.x.as_mut()) {
@@ -73,13 +73,8 @@ impl Eskf {
         if mag_active {
             self.check_mag_against_bank(m.t_ns, gsf);
         }
-        let mag_active = self.mag.state == MagState::Active && self.mag.diag.fused > 0;
-        // The bank sees the heading only through the velocity, as the main filter does when the
-        // antenna sits on the IMU and no camera is fitted; a lever arm or a camera tells the main
-        // filter more than the bank knows.
-        let velocity_only = self.lever_b.norm() < 0.05 && self.body_from_cam.is_none();
-        if !mag_active
-            && velocity_only
+        let mag_active = self.mag_fusing();
+        if self.heading_seen_by_gnss_velocity_only()
             && let Some(sigma) = self.yaw_est.honest_sigma_rad()
         {
             self.floor_yaw_sigma(sigma);
@@ -102,6 +97,18 @@ impl Eskf {
         }
     }
 
+    /// Whether the compass is active and has been fused.
+    fn mag_fusing(&self) -> bool {
+        self.mag.state == MagState::Active && self.mag.diag.fused > 0
+    }
+
+    /// Whether the main filter sees the heading only through the GNSS velocity, as the yaw bank
+    /// does: no compass fused, the antenna on the IMU and no camera (a lever arm or a camera
+    /// tells the main filter more than the bank knows).
+    fn heading_seen_by_gnss_velocity_only(&self) -> bool {
+        !self.mag_fusing() && self.lever_b.norm() < 0.05 && self.body_from_cam.is_none()
+    }
+
     /// The error states GNSS must not correct now: the yaw, when nothing but the GNSS velocity
     /// sees the heading (no compass fused, no lever arm, no camera) and the vehicle has not
     /// accelerated enough for it to tell the heading ([`YawEstimator::heading_unobservable`]).
@@ -113,9 +120,10 @@ impl Eskf {
     ///
     /// [`YawEstimator::heading_unobservable`]: crate::yaw_estimator::YawEstimator::heading_unobservable
     pub(super) fn heading_unobservable_states(&self) -> &'static [usize] {
-        let mag_active = self.mag.state == MagState::Active && self.mag.diag.fused > 0;
-        let velocity_only = self.lever_b.norm() < 0.05 && self.body_from_cam.is_none();
-        if self.yaw_aligned && !mag_active && velocity_only && self.yaw_est.heading_unobservable() {
+        if self.yaw_aligned
+            && self.heading_seen_by_gnss_velocity_only()
+            && self.yaw_est.heading_unobservable()
+        {
             &[ITH + 2]
         } else {
             &[]
