@@ -25,6 +25,7 @@ struct Args {
     quiet_s: f64,
     configure: bool,
     watch: Option<uavnav_proto::keys::Leaf>,
+    repeat_health_per_s: Option<f64>,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -34,6 +35,7 @@ fn parse_args() -> Result<Args, String> {
         quiet_s: 30.0,
         configure: false,
         watch: None,
+        repeat_health_per_s: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -44,6 +46,13 @@ fn parse_args() -> Result<Args, String> {
             "--settle-s" => a.settle_s = val()?.parse().map_err(|e| format!("--settle-s: {e}"))?,
             "--quiet-s" => a.quiet_s = val()?.parse().map_err(|e| format!("--quiet-s: {e}"))?,
             "--configure" => a.configure = true,
+            "--repeat-health-per-s" => {
+                a.repeat_health_per_s = Some(
+                    val()?
+                        .parse()
+                        .map_err(|e| format!("--repeat-health-per-s: {e}"))?,
+                );
+            }
             "--watch" => {
                 let leaf = val()?;
                 a.watch = Some(
@@ -55,7 +64,7 @@ fn parse_args() -> Result<Args, String> {
             "--help" | "-h" => {
                 return Err(
                     "usage: idle_fleet [--vehicles N] [--settle-s S] [--quiet-s S] \
-                     [--configure] [--watch health|unconfigured|pose]"
+                     [--configure] [--watch health|unconfigured|pose] [--repeat-health-per-s R]"
                         .into(),
                 );
             }
@@ -98,6 +107,9 @@ fn main() {
     rt.block_on(async move {
         let mut cfg = uavnav_tests::service::loopback_config();
         let endpoint = uavnav_tests::service::listen_zenoh(&mut cfg);
+        if let Some(r) = args.repeat_health_per_s {
+            cfg.zenoh.repeat_health_per_s = r;
+        }
         let server = uavnavd::Server::start(cfg).await.unwrap();
         let mut client = UavNavClient::connect(format!("http://{}", server.grpc_addr))
             .await
@@ -153,25 +165,29 @@ fn main() {
         }
         assert_eq!(server.metrics().vehicles.get() as usize, args.vehicles);
         tokio::time::sleep(Duration::from_secs_f64(args.settle_s)).await;
-        let (c0, t0, r0) = (
+        let skipped = || server.metrics().zenoh_health_repeats_skipped.get();
+        let (c0, t0, r0, s0) = (
             cpu_s(),
             Instant::now(),
             server.metrics().health_reports.get(),
+            skipped(),
         );
         tokio::time::sleep(Duration::from_secs_f64(args.quiet_s)).await;
         let (cpu, wall) = (cpu_s() - c0, t0.elapsed().as_secs_f64());
         let reports = server.metrics().health_reports.get() - r0;
+        let skipped = skipped() - s0;
         let received = watcher.as_ref().map_or(0, |(_, s)| s.drain().count());
         println!(
-            "idle fleet: {} vehicles{}{}, {:.2} s CPU in {:.1} s = {:.4} core, {:.0} health reports/s, \
-             {received} samples for the watched vehicle",
+            "idle fleet: {} vehicles{}{}, {:.2} s CPU in {:.1} s = {:.4} core, {:.0} health reports/s \
+             ({:.0}/s repeats not published on Zenoh), {received} samples for the watched vehicle",
             args.vehicles,
             if args.configure { ", configured" } else { "" },
             args.watch.map(|l| format!(", one vehicle's {} watched", l.as_str())).unwrap_or_default(),
             cpu,
             wall,
             cpu / wall,
-            reports as f64 / wall
+            reports as f64 / wall,
+            skipped as f64 / wall
         );
         server.shutdown().await.unwrap();
     });

@@ -250,6 +250,13 @@ pub struct ZenohConfig {
     /// Long enough that a healthy link on a busy machine never loses a sample; the other links
     /// are never held (Zenoh's `congestion_control/drop/wait_before_drop`).
     pub stalled_link_ms: f64,
+    /// Health reports that only repeat a quiet vehicle's previous one (nothing but the clocks
+    /// changed), published per second for the whole fleet while someone subscribes to health;
+    /// beyond it they are skipped (counted in `uavnav_zenoh_health_repeats_skipped_total`).
+    /// Every report that says something new is published. A watcher learns that a vehicle is
+    /// there from its liveliness token; this bounds what an idle fleet's reminders cost however
+    /// many vehicles it has. 0 publishes no repeats.
+    pub repeat_health_per_s: f64,
 }
 
 impl Default for ZenohConfig {
@@ -263,6 +270,7 @@ impl Default for ZenohConfig {
             multicast_scouting: true,
             instance: String::new(),
             stalled_link_ms: 50.0,
+            repeat_health_per_s: 100.0,
         }
     }
 }
@@ -718,6 +726,9 @@ impl Config {
         }
         if !(self.zenoh.stalled_link_ms >= 0.0 && self.zenoh.stalled_link_ms <= 10_000.0) {
             return bad("zenoh.stalled_link_ms must be in [0, 10000]");
+        }
+        if !(self.zenoh.repeat_health_per_s >= 0.0 && self.zenoh.repeat_health_per_s <= 1e6) {
+            return bad("zenoh.repeat_health_per_s must be in [0, 1e6]");
         }
         if self.health.period_ms == 0 {
             return bad("health.period_ms must be > 0");

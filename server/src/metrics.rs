@@ -261,6 +261,9 @@ pub struct Metrics {
     /// Messages Zenoh dropped on links congested beyond `zenoh.stalled_link_ms` (a subscriber
     /// that stopped reading), all peers together.
     pub zenoh_dropped: Counter,
+    /// Health reports that repeat a quiet vehicle's previous one and that Zenoh did not publish
+    /// for want of `zenoh.repeat_health_per_s`.
+    pub zenoh_health_repeats_skipped: Counter,
     /// Output batches (poses) and reports (health) gRPC watch streams skipped because they were
     /// behind.
     pub watch_lagged: Counter,
@@ -310,6 +313,7 @@ impl Metrics {
         let engine_errors = Counter::default();
         let zenoh_output_lagged = Counter::default();
         let zenoh_dropped = Counter::default();
+        let zenoh_health_repeats_skipped = Counter::default();
         let watch_lagged = Counter::default();
         let zenoh_samples = Counter::default();
         let foxglove_dropped = Counter::default();
@@ -424,6 +428,11 @@ impl Metrics {
             zenoh_dropped.clone(),
         );
         registry.register(
+            "zenoh_health_repeats_skipped",
+            "Quiet vehicles' repeated health reports not published on Zenoh (beyond zenoh.repeat_health_per_s)",
+            zenoh_health_repeats_skipped.clone(),
+        );
+        registry.register(
             "watch_lagged",
             "Pose batches and health reports gRPC watch streams skipped because they were behind",
             watch_lagged.clone(),
@@ -475,6 +484,7 @@ impl Metrics {
             engine_errors,
             zenoh_output_lagged,
             zenoh_dropped,
+            zenoh_health_repeats_skipped,
             watch_lagged,
             zenoh_samples,
             foxglove_dropped,

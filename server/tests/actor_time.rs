@@ -81,22 +81,31 @@ async fn health_comes_once_per_period_with_rates_over_that_period() {
     assert!(accepted(&fleet.imu("uav", 50).await));
     fleet.run_for(Duration::from_millis(1000)).await;
     fleet.run_for(Duration::from_millis(1000)).await;
-    let next = fleet.health_reports();
+    let next = fleet.tagged_health_reports();
     let rates: Vec<f64> = next
         .iter()
-        .map(|h| h.input_rates.as_ref().unwrap().imu_hz)
+        .map(|r| r.health.input_rates.as_ref().unwrap().imu_hz)
         .collect();
     assert_eq!(rates, [50.0, 0.0]);
+    // Both say something new (the rates changed each time).
+    assert!(next.iter().all(|r| !r.repeat));
 
     // Idle since: one report in ten periods (an idle fleet costs next to nothing), no more, no
-    // fewer.
+    // fewer; nothing but their clocks differs from the last report: repeats (which Zenoh
+    // publishes within a fleet-wide budget).
     fleet.run_for(10 * S).await;
-    assert_eq!(fleet.health_reports().len(), 1);
+    let idle = fleet.tagged_health_reports();
+    assert_eq!(idle.len(), 1);
+    assert!(idle[0].repeat, "{idle:?}");
     fleet.run_for(20 * S).await;
-    assert_eq!(fleet.health_reports().len(), 2);
-    assert!(next.iter().all(|h| h.vehicle_id == "uav"));
-    // Input again: every period again.
+    let idle = fleet.tagged_health_reports();
+    assert_eq!(idle.len(), 2);
+    assert!(idle.iter().all(|r| r.repeat));
+    assert!(next.iter().all(|r| r.health.vehicle_id == "uav"));
+    // Input again: every period again, and news.
     assert!(accepted(&fleet.imu("uav", 10).await));
     fleet.run_for(3 * S).await;
-    assert_eq!(fleet.health_reports().len(), 2);
+    let again = fleet.tagged_health_reports();
+    assert_eq!(again.len(), 2);
+    assert!(!again[0].repeat);
 }

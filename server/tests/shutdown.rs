@@ -67,7 +67,7 @@ async fn shutdown_drains_queued_data_and_publishes_final_health() {
     assert_eq!(count, 3 * n, "every accepted sample fused before exit");
     let mut finals = Vec::new();
     while let Ok(h) = all_health.try_recv() {
-        finals.push(h.vehicle_id.clone());
+        finals.push(h.health.vehicle_id.clone());
     }
     finals.sort();
     assert_eq!(

@@ -110,6 +110,53 @@ async fn unconfigured_reports_come_only_while_a_vehicle_lacks_its_configuration(
     server.shutdown().await.unwrap();
 }
 
+/// A quiet vehicle's repeated health reports (nothing but the clocks changed) go out on Zenoh
+/// only within `zenoh.repeat_health_per_s`: with a budget of 0 a watcher gets every report with
+/// news and no repeat, and each repeat held back is counted; with a budget it gets them.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_quiet_vehicles_repeats_go_out_only_within_the_budget() {
+    use uavnavd::health::repeats;
+    for budget in [0.0, 1000.0] {
+        let mut cfg = test_config();
+        // A quiet vehicle reports once in ten periods: every 200 ms.
+        cfg.health.period_ms = 20;
+        cfg.zenoh.repeat_health_per_s = budget;
+        let endpoint = listen_zenoh(&mut cfg);
+        let server = start(cfg).await;
+        let z = zenoh_peer(&endpoint).await;
+        let key = |leaf: Leaf| keys::vehicle_key("quiet", leaf);
+        let health = z.declare_subscriber(key(Leaf::Health)).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        let batch = pb::ImuBatch {
+            samples: vec![imu(1_000_000_000)],
+        };
+        z.put(key(Leaf::Imu), batch.encode_to_vec())
+            .encoding(enc("uavnav.v1.ImuBatch"))
+            .await
+            .unwrap();
+        tokio::time::sleep(Duration::from_millis(2000)).await;
+        let mut got = Vec::new();
+        while let Ok(Some(s)) = health.try_recv() {
+            got.push(pb::VehicleHealth::decode(&*s.payload().to_bytes()).unwrap());
+        }
+        let repeated = got.windows(2).filter(|w| repeats(&w[0], &w[1])).count();
+        let skipped = server.metrics().zenoh_health_repeats_skipped.get();
+        assert!(!got.is_empty(), "budget {budget}: no report at all");
+        if budget == 0.0 {
+            assert_eq!(repeated, 0, "budget 0 published repeats: {got:?}");
+            assert!(skipped >= 4, "budget 0: {skipped} repeats counted");
+        } else {
+            assert!(
+                repeated >= 4,
+                "budget {budget}: {repeated} repeats in {got:?}"
+            );
+            assert_eq!(skipped, 0);
+        }
+        z.close().await.unwrap();
+        server.shutdown().await.unwrap();
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn zenoh_round_trip() {
     let mut cfg = test_config();

@@ -33,7 +33,7 @@ pub const IMU_DT_NS: i64 = 5_000_000;
 #[derive(Debug)]
 pub struct Fleet {
     ingestor: Ingestor,
-    health: broadcast::Receiver<Arc<pb::VehicleHealth>>,
+    health: broadcast::Receiver<Arc<uavnavd::hub::HealthReport>>,
     /// Kept so that the service is not told to stop.
     _stop: watch::Sender<bool>,
     /// Each vehicle's next IMU sensor time.
@@ -107,6 +107,14 @@ impl Fleet {
     /// The health reports published so far (every vehicle's, oldest first) that the harness has
     /// not returned before.
     pub fn health_reports(&mut self) -> Vec<Arc<pb::VehicleHealth>> {
+        self.tagged_health_reports()
+            .into_iter()
+            .map(|r| Arc::clone(&r.health))
+            .collect()
+    }
+
+    /// As [`Self::health_reports`], with whether each repeats the vehicle's previous report.
+    pub fn tagged_health_reports(&mut self) -> Vec<Arc<uavnavd::hub::HealthReport>> {
         let mut out = Vec::new();
         loop {
             match self.health.try_recv() {

@@ -1,6 +1,7 @@
 //! Per-vehicle health reports, made by each actor at a fixed rate: mode, input rates, counters,
 //! vision quality, innovation test ratios and ingest-to-pose latency over the last period.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use uavnav_proto::v1 as pb;
@@ -119,6 +120,47 @@ impl HealthWindow {
     }
 }
 
+/// One health report as it goes through the hub.
+#[derive(Debug, Clone)]
+pub struct HealthReport {
+    /// The report.
+    pub health: Arc<pb::VehicleHealth>,
+    /// Nothing in it but the clocks differs from the vehicle's previous report: a quiet vehicle's
+    /// periodic reminder that it is there. Zenoh publishes such repeats within a fleet-wide
+    /// budget (`zenoh.repeat_health_per_s`), so that one watcher does not make an idle fleet's
+    /// reminders cost in proportion to its size; gRPC watchers get every report.
+    pub repeat: bool,
+}
+
+/// Whether `new` says nothing that `prev` did not: the same vehicle, mode, rates, latencies,
+/// test ratios, counters, vision quality, reorder depth and configuration; only the stream time
+/// and the wall clock may differ.
+pub fn repeats(prev: &pb::VehicleHealth, new: &pb::VehicleHealth) -> bool {
+    // Destructured so that a field added to the message must be placed on one side or the other.
+    let pb::VehicleHealth {
+        vehicle_id,
+        t_ns: _,
+        wall_ns: _,
+        mode,
+        input_rates,
+        latency,
+        innovation_ratios,
+        counters,
+        vision,
+        reorder_depth,
+        configured,
+    } = new;
+    *vehicle_id == prev.vehicle_id
+        && *mode == prev.mode
+        && *input_rates == prev.input_rates
+        && *latency == prev.latency
+        && *innovation_ratios == prev.innovation_ratios
+        && *counters == prev.counters
+        && *vision == prev.vision
+        && *reorder_depth == prev.reorder_depth
+        && *configured == prev.configured
+}
+
 /// p50 / p99 / max of the samples (all zero when empty).
 fn latency_stats(samples: &mut [f64]) -> pb::LatencyStats {
     if samples.is_empty() {
@@ -144,6 +186,34 @@ mod tests {
         assert!((s.p50_s - 0.050).abs() < 0.0015);
         assert!((s.p99_s - 0.099).abs() < 0.0015);
         assert_eq!(s.max_s, 0.1);
+    }
+
+    #[test]
+    fn a_quiet_vehicles_second_report_repeats_its_first_and_any_change_does_not() {
+        let shared = VehicleShared::new("v".into());
+        let t0 = Instant::now();
+        let mut w = HealthWindow::new(t0);
+        let engine = EngineHealth::default();
+        let at = |s: u64| t0 + std::time::Duration::from_secs(s);
+        VehicleStats::add(&shared.stats.imu, 200);
+        let busy = w.report(&shared, &engine, 0, at(1));
+        let first_quiet = w.report(&shared, &engine, 0, at(2));
+        let second_quiet = w.report(&shared, &engine, 0, at(12));
+        // The rates fell to zero: news.
+        assert!(!repeats(&busy, &first_quiet));
+        // Ten seconds later nothing but the clocks moved.
+        assert_ne!(first_quiet.wall_ns, 0);
+        assert!(repeats(&first_quiet, &second_quiet));
+        // A refused input, a mode change or another vehicle is news.
+        VehicleStats::add(&shared.stats.rejected, 1);
+        let refused = w.report(&shared, &engine, 0, at(22));
+        assert!(!repeats(&second_quiet, &refused));
+        let mut moded = refused.clone();
+        moded.mode += 1;
+        assert!(!repeats(&refused, &moded));
+        let mut other = refused.clone();
+        other.vehicle_id = "w".into();
+        assert!(!repeats(&refused, &other));
     }
 
     #[test]

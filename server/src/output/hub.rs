@@ -11,9 +11,8 @@
 
 use std::sync::Arc;
 
+pub use crate::output::health::HealthReport;
 use tokio::sync::{broadcast, watch};
-use uavnav_proto::v1 as pb;
-
 pub use uavnav_proto::compact::{Pose, PoseBatch};
 
 /// Pose ring size, in batches (typically 4–10 poses each): a second of the whole fleet's poses at
@@ -29,7 +28,7 @@ pub struct Hub {
     /// Every pose.
     pub poses: broadcast::Sender<Arc<PoseBatch>>,
     /// Every health report.
-    pub health: broadcast::Sender<Arc<pb::VehicleHealth>>,
+    pub health: broadcast::Sender<Arc<HealthReport>>,
     /// Vehicle lifecycle (id, alive) for liveliness tokens.
     pub lifecycle: broadcast::Sender<(Arc<str>, bool)>,
     /// Becomes `true` when the service starts shutting down.

@@ -20,7 +20,7 @@ use uavnav_proto::v1::uav_nav_server::UavNav;
 use crate::ingest::Payload;
 use crate::ingest::validate;
 use crate::metrics::{Cause, Kind, Outcome, Transport};
-use crate::output::hub::PoseBatch;
+use crate::output::hub::{HealthReport, PoseBatch};
 use crate::security::{Access, AuthTransport, PeerInfo};
 use crate::service::Service;
 
@@ -232,16 +232,16 @@ trait Watched: Send + Sync + 'static {
     fn message(&self, i: usize) -> Option<Self::Out>;
 }
 
-impl Watched for pb::VehicleHealth {
+impl Watched for HealthReport {
     type Out = pb::VehicleHealth;
     fn vehicle_id(&self) -> &str {
-        &self.vehicle_id
+        &self.health.vehicle_id
     }
     fn len(&self) -> usize {
         1
     }
     fn message(&self, _: usize) -> Option<Self::Out> {
-        Some(self.clone())
+        Some((*self.health).clone())
     }
 }
 

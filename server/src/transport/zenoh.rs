@@ -29,10 +29,10 @@ use zenoh::liveliness::LivelinessToken;
 use crate::config::ZenohConfig;
 use crate::ingest::{Ingestor, Payload};
 use crate::metrics::{Cause, Kind, Outcome, Transport};
-use crate::output::hub::{Hub, PoseBatch};
+use crate::output::hub::{HealthReport, Hub, PoseBatch};
 use crate::security::{Access, SecurityConfig};
 use crate::service::Service;
-use crate::vehicle::VehicleStats;
+use crate::vehicle::{VehicleStats, mono_now};
 
 /// The metric kind of an input leaf (`None` for the outputs, which the input subscription also
 /// matches).
@@ -158,6 +158,7 @@ impl ZenohIo {
             session.clone(),
             hub.poses.subscribe(),
             hub.health.subscribe(),
+            RepeatBudget::new(cfg.repeat_health_per_s),
             ingestor,
             done_rx,
         );
@@ -480,7 +481,8 @@ fn spawn_liveliness(
 async fn publish_outputs(
     session: Session,
     mut poses: broadcast::Receiver<Arc<PoseBatch>>,
-    mut health: broadcast::Receiver<Arc<pb::VehicleHealth>>,
+    mut health: broadcast::Receiver<Arc<HealthReport>>,
+    mut repeats: RepeatBudget,
     ingestor: Ingestor,
     mut done: oneshot::Receiver<()>,
 ) {
@@ -497,12 +499,19 @@ async fn publish_outputs(
         tokio::select! {
             biased;
             r = health.recv() => match r {
-                Ok(h) => {
-                    if health_watched.any() {
-                        out.health(&h, Leaf::Health).await;
+                Ok(r) => {
+                    let h = &r.health;
+                    let health = health_watched.any();
+                    let unconfigured = !h.configured && unconfigured_watched.any();
+                    if (health || unconfigured) && r.repeat && !repeats.take(mono_now()) {
+                        metrics.zenoh_health_repeats_skipped.inc();
+                        continue;
                     }
-                    if !h.configured && unconfigured_watched.any() {
-                        out.health(&h, Leaf::Unconfigured).await;
+                    if health {
+                        out.health(h, Leaf::Health).await;
+                    }
+                    if unconfigured {
+                        out.health(h, Leaf::Unconfigured).await;
                     }
                 }
                 Err(broadcast::error::RecvError::Lagged(n)) => {
@@ -524,8 +533,44 @@ async fn publish_outputs(
     while let Ok(b) = poses.try_recv() {
         out.poses(&b).await;
     }
-    while let Ok(h) = health.try_recv() {
-        out.health(&h, Leaf::Health).await;
+    while let Ok(r) = health.try_recv() {
+        out.health(&r.health, Leaf::Health).await;
+    }
+}
+
+/// The fleet-wide allowance of repeated health reports on Zenoh: a token bucket refilled at
+/// `per_s`, holding at most one second's worth. Repeats come from quiet vehicles, once every
+/// ten health periods each, so without it one watcher would make an idle fleet's reminders cost
+/// in proportion to the fleet (10,000 idle vehicles: 1,000 puts a second).
+#[derive(Debug)]
+struct RepeatBudget {
+    per_s: f64,
+    tokens: f64,
+    at: Option<std::time::Instant>,
+}
+
+impl RepeatBudget {
+    fn new(per_s: f64) -> Self {
+        Self {
+            per_s,
+            tokens: per_s,
+            at: None,
+        }
+    }
+
+    /// Takes one repeat's allowance at `now`, if there is one.
+    fn take(&mut self, now: std::time::Instant) -> bool {
+        if let Some(at) = self.at {
+            let dt_s = now.saturating_duration_since(at).as_secs_f64();
+            self.tokens = (self.tokens + dt_s * self.per_s).min(self.per_s);
+        }
+        self.at = Some(now);
+        if self.tokens >= 1.0 {
+            self.tokens -= 1.0;
+            true
+        } else {
+            false
+        }
     }
 }
 
@@ -634,5 +679,26 @@ impl Outputs {
         if let Err(e) = put.await {
             debug!(key, error = %e, "zenoh put failed");
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::RepeatBudget;
+    use std::time::{Duration, Instant};
+
+    #[test]
+    fn the_repeat_budget_allows_its_rate_and_no_more_however_many_ask() {
+        let t0 = Instant::now();
+        let mut b = RepeatBudget::new(100.0);
+        // 10,000 quiet vehicles' repeats over 10 s (1,000 a second): 100 a second get through,
+        // plus the first second's allowance.
+        let allowed = (0..10_000)
+            .filter(|&i| b.take(t0 + Duration::from_micros(i * 1000)))
+            .count();
+        assert!((1000..=1100).contains(&allowed), "{allowed}");
+        // A budget of 0 lets nothing through.
+        let mut none = RepeatBudget::new(0.0);
+        assert!((0..100).all(|i| !none.take(t0 + Duration::from_secs(i))));
     }
 }

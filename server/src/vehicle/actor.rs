@@ -19,7 +19,7 @@ use uavnav_core::{
 
 use crate::config::VehiclesConfig;
 use crate::metrics::Metrics;
-use crate::output::health::HealthWindow;
+use crate::output::health::{HealthReport, HealthWindow};
 use crate::output::hub::{Hub, Pose, PoseBatch};
 use crate::vehicle::budgets::{CameraBytes, CameraPixels, InputBytes, Reserved};
 use crate::vehicle::engine::{
@@ -697,10 +697,15 @@ impl Actor {
                 self.window
                     .report(&self.shared, &engine, self.buffer.len(), mono_now()),
             );
-        self.shared
+        let previous = self
+            .shared
             .latest_health
             .send_replace(Some(Arc::clone(&report)));
-        let _ = self.ctx.hub.health.send(report);
+        let repeat = previous.is_some_and(|p| crate::output::health::repeats(&p, &report));
+        let _ = self.ctx.hub.health.send(Arc::new(HealthReport {
+            health: report,
+            repeat,
+        }));
         self.ctx.metrics.health_reports.inc();
     }
 }
