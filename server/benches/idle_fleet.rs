@@ -11,7 +11,9 @@
 //! `--configure` sends each vehicle a configuration first. `--watch LEAF` adds what a sender's
 //! keeper does: a Zenoh peer subscribed to one vehicle's `LEAF` (`health`, or `unconfigured`,
 //! which the client library's keeper uses), which makes the service publish that leaf for the
-//! fleet whenever its reports are due.
+//! fleet whenever its reports are due (a quiet vehicle's repeats within
+//! `zenoh.repeat_health_per_s`, which `--repeat-health-per-s R` sets; the figure printed after
+//! the rate is how many were held back).
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use std::time::{Duration, Instant};
