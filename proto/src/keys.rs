@@ -15,13 +15,15 @@
 //! | `uavnav/v1/vehicle/{id}/pose/latest` | queryable | `uavnav.v1.PoseEstimate` |
 //! | `uavnav/v1/vehicles` | queryable | `uavnav.v1.ListVehiclesResponse` |
 //! | `uavnav/v1/service/{instance}` | liveliness token | — |
-//! | `uavnav/v1/alive/{id}` | liveliness token | — |
+//! | `uavnav/v1/alive/vehicle/{id}` | liveliness token | — |
 //!
-//! The vehicles' liveliness tokens live outside `uavnav/v1/vehicle/`: Zenoh routes a put on a key
-//! that nobody declared by matching it against every declared key below the common prefix, so a
-//! token per vehicle under `vehicle/` made every pose and health put cost in proportion to the
-//! fleet (10,000 vehicles: ~4 ms a put, measured with `cargo bench -p uavnavd --bench
-//! idle_fleet`; 31 µs with the tokens here).
+//! The vehicles' liveliness tokens live outside `uavnav/v1/vehicle/`, one level below a node of
+//! their own: Zenoh routes a put on a key that nobody declared by walking its tree of declared
+//! keys, comparing the key with every child of each node it reaches, and it reaches every child
+//! of a node whose own key matched (`uavnav/v1` reaches `alive`). A token per vehicle under
+//! `vehicle/` made every pose and health put cost in proportion to the fleet (10,000 vehicles:
+//! ~4 ms a put, measured with `cargo bench -p uavnavd --bench idle_fleet`), and so did 10,000
+//! tokens directly under `alive/`.
 //!
 //! Payloads are the protobuf encoding of the message, with Zenoh encoding `application/protobuf`
 //! and the message's full name ([`Leaf::message_name`]) as schema: [`encoding_for`] gives that
@@ -39,7 +41,7 @@ pub const VEHICLES: &str = "uavnav/v1/vehicles";
 /// Prefix of the service liveliness tokens.
 pub const SERVICE_PREFIX: &str = "uavnav/v1/service";
 /// Prefix of the vehicles' liveliness tokens.
-pub const ALIVE_PREFIX: &str = "uavnav/v1/alive";
+pub const ALIVE_PREFIX: &str = "uavnav/v1/alive/vehicle";
 /// Every key under every vehicle (inputs, outputs, queryables).
 pub const ALL_VEHICLE_KEYS: &str = "uavnav/v1/vehicle/**";
 /// Every `{leaf}` of every vehicle (the service's input subscription; it also matches the
@@ -192,7 +194,7 @@ pub fn pose_latest_key(id: &str) -> String {
     format!("{VEHICLE_PREFIX}/{id}/pose/latest")
 }
 
-/// `uavnav/v1/alive/{id}` (the vehicle's liveliness token).
+/// `uavnav/v1/alive/vehicle/{id}` (the vehicle's liveliness token).
 pub fn alive_key(id: &str) -> String {
     format!("{ALIVE_PREFIX}/{id}")
 }
@@ -306,6 +308,16 @@ mod tests {
         }
     }
 
+    /// Why the tokens sit where they do (see the module doc): not among the vehicle keys, and
+    /// not as children of a node that a put's routing walk enters (a child of `uavnav/v1`).
+    #[test]
+    fn vehicle_tokens_stay_out_of_the_output_puts_routing_walk() {
+        let token = alive_key("a");
+        assert!(split_vehicle(&token).is_none() && !token.starts_with(VEHICLE_PREFIX));
+        let below_v1 = token.strip_prefix("uavnav/v1/").unwrap();
+        assert_eq!(below_v1.split('/').count(), 3, "{token}: alive/<node>/<id>");
+    }
+
     #[test]
     fn json_strings_are_escaped() {
         assert_eq!(json_string(r#"/a "b"\c"#), r#""/a \"b\"\\c""#);
@@ -327,7 +339,7 @@ mod tests {
         assert_eq!(split(&pose_latest_key("a")), None);
         assert_eq!(split(&alive_key("a")), None);
         assert_eq!(split_vehicle(&alive_key("a")), None);
-        assert_eq!(alive_key("a"), "uavnav/v1/alive/a");
+        assert_eq!(alive_key("a"), "uavnav/v1/alive/vehicle/a");
         assert_eq!(split("uavnav/v1/vehicles"), None);
         assert_eq!(split("other/v1/vehicle/a/imu"), None);
     }

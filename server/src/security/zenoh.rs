@@ -9,7 +9,7 @@
 //! |---|---|---|
 //! | feed | put on `uavnav/v1/vehicle/{fleet}/{imu,gnss,mag,baro,camera}` | |
 //! | configure | put on `…/{fleet}/config` | |
-//! | watch | subscribe to `…/{fleet}/{pose,health}`, query `…/{fleet}/pose/latest`, watch `uavnav/v1/alive/{fleet}` | those puts, replies and tokens |
+//! | watch | subscribe to `…/{fleet}/{pose,health}`, query `…/{fleet}/pose/latest`, watch `uavnav/v1/alive/vehicle/{fleet}` | those puts, replies and tokens |
 //! | list | (with the fleet `""` only) query `uavnav/v1/vehicles` | the reply |
 //!
 //! where `{fleet}` is `{prefix}$*` (`*` for the empty prefix). Every principal also receives the
