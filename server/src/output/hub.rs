@@ -11,8 +11,9 @@
 
 use std::sync::Arc;
 
-pub use crate::output::health::HealthReport;
 use tokio::sync::{broadcast, watch};
+
+pub use crate::output::health::HealthReport;
 pub use uavnav_proto::compact::{Pose, PoseBatch};
 
 /// Pose ring size, in batches (typically 4–10 poses each): a second of the whole fleet's poses at

@@ -499,18 +499,21 @@ async fn publish_outputs(
         tokio::select! {
             biased;
             r = health.recv() => match r {
-                Ok(r) => {
-                    let h = &r.health;
-                    let health = health_watched.any();
-                    let unconfigured = !h.configured && unconfigured_watched.any();
-                    if (health || unconfigured) && r.repeat && !repeats.take(mono_now()) {
+                Ok(report) => {
+                    let h = &report.health;
+                    let on_health = health_watched.any();
+                    let on_unconfigured = !h.configured && unconfigured_watched.any();
+                    if (on_health || on_unconfigured)
+                        && report.repeat
+                        && !repeats.take(mono_now())
+                    {
                         metrics.zenoh_health_repeats_skipped.inc();
                         continue;
                     }
-                    if health {
+                    if on_health {
                         out.health(h, Leaf::Health).await;
                     }
-                    if unconfigured {
+                    if on_unconfigured {
                         out.health(h, Leaf::Unconfigured).await;
                     }
                 }
@@ -539,7 +542,8 @@ async fn publish_outputs(
 }
 
 /// The fleet-wide allowance of repeated health reports on Zenoh: a token bucket refilled at
-/// `per_s`, holding at most one second's worth. Repeats come from quiet vehicles, once every
+/// `per_s`, holding one second's worth (at least one report, so that a rate below 1/s still
+/// lets one through now and then). Repeats come from quiet vehicles, once every
 /// ten health periods each, so without it one watcher would make an idle fleet's reminders cost
 /// in proportion to the fleet (10,000 idle vehicles: 1,000 puts a second).
 #[derive(Debug)]
@@ -553,16 +557,21 @@ impl RepeatBudget {
     fn new(per_s: f64) -> Self {
         Self {
             per_s,
-            tokens: per_s,
+            tokens: Self::capacity(per_s),
             at: None,
         }
+    }
+
+    /// What the bucket holds when full: a second's worth, at least one report (none for 0).
+    fn capacity(per_s: f64) -> f64 {
+        if per_s > 0.0 { per_s.max(1.0) } else { 0.0 }
     }
 
     /// Takes one repeat's allowance at `now`, if there is one.
     fn take(&mut self, now: std::time::Instant) -> bool {
         if let Some(at) = self.at {
             let dt_s = now.saturating_duration_since(at).as_secs_f64();
-            self.tokens = (self.tokens + dt_s * self.per_s).min(self.per_s);
+            self.tokens = (self.tokens + dt_s * self.per_s).min(Self::capacity(self.per_s));
         }
         self.at = Some(now);
         if self.tokens >= 1.0 {
@@ -700,5 +709,11 @@ mod tests {
         // A budget of 0 lets nothing through.
         let mut none = RepeatBudget::new(0.0);
         assert!((0..100).all(|i| !none.take(t0 + Duration::from_secs(i))));
+        // Below one a second: one every 1/rate seconds (10 s at 0.1/s), asked every second.
+        let mut slow = RepeatBudget::new(0.1);
+        let allowed = (0..100)
+            .filter(|&i| slow.take(t0 + Duration::from_secs(i)))
+            .count();
+        assert!((10..=11).contains(&allowed), "{allowed}");
     }
 }

@@ -19,7 +19,7 @@ use uavnav_core::{
 
 use crate::config::VehiclesConfig;
 use crate::metrics::Metrics;
-use crate::output::health::{HealthReport, HealthWindow};
+use crate::output::health::{HealthReport, HealthWindow, repeats};
 use crate::output::hub::{Hub, Pose, PoseBatch};
 use crate::vehicle::budgets::{CameraBytes, CameraPixels, InputBytes, Reserved};
 use crate::vehicle::engine::{
@@ -701,7 +701,7 @@ impl Actor {
             .shared
             .latest_health
             .send_replace(Some(Arc::clone(&report)));
-        let repeat = previous.is_some_and(|p| crate::output::health::repeats(&p, &report));
+        let repeat = previous.is_some_and(|p| repeats(&p, &report));
         let _ = self.ctx.hub.health.send(Arc::new(HealthReport {
             health: report,
             repeat,
