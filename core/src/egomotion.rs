@@ -43,6 +43,12 @@ pub struct Egomotion {
     pub t_dir_cam1: Option<Unit<Vector3<f64>>>,
     /// Metric `t` (camera-1 frame, m) when the scene distance is known (terrain model), else `None`.
     pub t_cam1_m: Option<Vector3<f64>>,
+    /// The camera-0 distance to the terrain plane that scaled `t_cam1_m`, m, when the scale came
+    /// from the motion prior (the plane solver measures `t / d` and multiplies by this `d`): the
+    /// metric translation is then proportional to the estimator's own height above the terrain,
+    /// and the estimator models that dependence (`aid_sources::vision::PlaneScale`). `None` when
+    /// the scale does not come from a prior distance.
+    pub scale_distance_m: Option<f64>,
     /// Covariance of the rotation error `δθ` (rad²), with `R_meas = Exp(δθ) · R_true`, camera-1 frame.
     pub rot_cov: Matrix3<f64>,
     /// Covariance of the translation: of the unit direction (rank 2) or of the metric `t` when

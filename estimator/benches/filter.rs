@@ -122,6 +122,7 @@ fn bench(c: &mut Criterion) {
                     &mut p,
                     &lever,
                     &gyro,
+                    1e-6,
                     &w_ie,
                     &m,
                     3.29,
@@ -154,6 +155,7 @@ fn bench(c: &mut Criterion) {
         cam1_from_cam0: UnitQuaternion::identity(),
         t_dir_cam1: Some(nalgebra::Unit::new_normalize(t)),
         t_cam1_m: Some(t + Vector3::new(0.01, -0.01, 0.0)),
+        scale_distance_m: None,
         rot_cov: cov.fixed_view::<3, 3>(0, 0).into_owned(),
         t_cov: cov.fixed_view::<3, 3>(3, 3).into_owned(),
         joint_cov: cov,
@@ -168,6 +170,7 @@ fn bench(c: &mut Criterion) {
         joint: true,
         cov_scale: 6.0,
         gate_sigma: 3.29,
+        scale: vision::PlaneScale::new(200.0, 198.0),
     };
     c.bench_function("eskf_vision_update (joint 6-dof)", |b| {
         b.iter_batched(

@@ -75,6 +75,7 @@ fn gnss_updates(flight: &Flight, repeats: usize) {
             &mut p,
             &lever,
             &gyro,
+            1e-6,
             &w_ie,
             &m,
             3.29,

@@ -194,6 +194,7 @@ mod tests {
                 cam1_from_cam0: nalgebra::UnitQuaternion::identity(),
                 t_dir_cam1: None,
                 t_cam1_m: None,
+                scale_distance_m: None,
                 rot_cov: nalgebra::Matrix3::identity(),
                 t_cov: nalgebra::Matrix3::identity(),
                 joint_cov: nalgebra::Matrix6::identity(),

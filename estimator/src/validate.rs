@@ -257,6 +257,14 @@ pub fn check_egomotion(
     if let Some(t) = m.t_cam1_m {
         finite3(&t, "egomotion translation")?;
     }
+    if let Some(d) = m.scale_distance_m
+        && !(d.is_finite() && d > 0.0)
+    {
+        return Err(InputError::Absurd {
+            what: "egomotion scale distance m",
+            value: d,
+        });
+    }
     if !m
         .rot_cov
         .iter()

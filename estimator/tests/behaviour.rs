@@ -230,6 +230,7 @@ fn common_ego(t_ns: i64) -> uavnav_core::Egomotion {
         cam1_from_cam0: UnitQuaternion::identity(),
         t_dir_cam1: None,
         t_cam1_m: None,
+        scale_distance_m: None,
         rot_cov: nalgebra::Matrix3::identity() * 1e-8,
         t_cov: nalgebra::Matrix3::identity() * 1e-4,
         joint_cov: nalgebra::Matrix6::identity() * 1e-8,

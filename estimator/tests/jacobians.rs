@@ -229,6 +229,37 @@ fn vision_translation_h() {
     );
 }
 
+/// The plane solver's scale `d̂ / d(x)` (eq. V2): `d(x)` is the clone camera's height above a
+/// flat terrain 30 m below the origin (NED down = 30), the distance the solver used 3 % larger.
+#[test]
+fn vision_plane_scaled_metric_translation_h() {
+    let x = nominal();
+    let bfc = mount();
+    let scale = |s: &Nominal| {
+        let c0 = s.clone.unwrap();
+        let centre = c0.p + c0.q * bfc.translation.vector;
+        vision::PlaneScale::new(236.0, 30.0 - centre.z).unwrap()
+    };
+    let s0 = scale(&x);
+    assert!((s0.prior_distance_m / s0.distance_m - 1.03).abs() < 0.01);
+    let (t_scaled, h) = vision::metric_model(&x, &x.clone.unwrap(), &bfc, Some(&s0));
+    let (t, _) = vision::translation_model(&x, &x.clone.unwrap(), &bfc);
+    assert!((t_scaled - t * (s0.prior_distance_m / s0.distance_m)).norm() < 1e-12);
+    check_h(
+        "vision_t_scaled",
+        &x,
+        &h,
+        |s| -vision::metric_model(s, &s.clone.unwrap(), &bfc, Some(&scale(s))).0,
+        1e-5,
+    );
+    // A height change of the clone is now visible to the measurement (1 m → ≈ t / d).
+    let c_pd = uavnav_estimator::state::ICP + 2;
+    assert!(h.column(c_pd).norm() > 0.9 * t.norm() / s0.distance_m);
+    // Distances that cannot be linearised are not modelled.
+    assert!(vision::PlaneScale::new(100.0, 40.0).is_none());
+    assert!(vision::PlaneScale::new(100.0, 0.5).is_none());
+}
+
 #[test]
 fn vision_direction_h() {
     let x = nominal();
@@ -289,6 +320,7 @@ fn metric_ego(
         cam1_from_cam0: UnitQuaternion::from_scaled_axis(Vector3::new(2e-5, -1e-5, 3e-5)) * rot,
         t_dir_cam1: Some(nalgebra::Unit::new_normalize(t_m)),
         t_cam1_m: Some(t_m),
+        scale_distance_m: None,
         rot_cov: c.fixed_view::<3, 3>(0, 0).into_owned(),
         t_cov: c.fixed_view::<3, 3>(3, 3).into_owned(),
         joint_cov: c,
@@ -306,6 +338,7 @@ fn vision_use(joint: bool) -> vision::VisionUse {
         joint,
         cov_scale: 1.0,
         gate_sigma: 1e3,
+        scale: None,
     }
 }
 

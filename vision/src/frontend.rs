@@ -4,7 +4,7 @@
 use nalgebra::{Isometry3, Matrix2, Matrix3, Point2, Unit, UnitQuaternion, Vector2, Vector3};
 use thiserror::Error;
 use uavnav_core::rng::Rng;
-use uavnav_core::{CameraModel, Egomotion, ImageFormat, MotionPrior};
+use uavnav_core::{CameraModel, Egomotion, EgomotionSolver, ImageFormat, MotionPrior};
 
 use crate::corners::{CornerScratch, best_corner_with};
 use crate::decode::{DecodeError, LumaDecoder};
@@ -410,6 +410,11 @@ impl FrontEnd {
                 cam1_from_cam0: to_quat(&s.r),
                 t_dir_cam1: s.t_dir.map(Unit::new_normalize),
                 t_cam1_m: s.t_m,
+                // Only the plane solver scales `t` (by the prior's distance).
+                scale_distance_m: match s.solver {
+                    EgomotionSolver::Plane if s.t_m.is_some() => prior.ground_distance_m,
+                    _ => None,
+                },
                 rot_cov: s.cov.fixed_view::<3, 3>(0, 0).into_owned(),
                 t_cov: s.cov.fixed_view::<3, 3>(3, 3).into_owned(),
                 joint_cov: s.cov,

@@ -23,9 +23,9 @@ use crate::aid_sources::baro_height::{BaroHeightSource, BaroParams};
 use crate::aid_sources::gnss_pos::{
     GnssMeas, GnssPosSource, correlated_sigma, gm_psd, white_noise,
 };
-use crate::aid_sources::gnss_vel::GnssVelSource;
+use crate::aid_sources::gnss_vel::{GnssVelSource, LEVER_GYRO_HALF_WINDOW_NS, lever_gyro};
 use crate::aid_sources::mag_heading::MagHeadingSource;
-use crate::aid_sources::vision::{VisionSource, VisionUse};
+use crate::aid_sources::vision::{PlaneScale, VisionSource, VisionUse};
 use crate::buffer::{DelayBuffer, Event, MAX_IMU_HISTORY};
 use crate::init::{Initialiser, hold_yaw_unknown};
 use crate::output::PoseOutput;
@@ -57,6 +57,9 @@ pub struct Eskf {
     lever_b: Vector3<f64>,
     body_from_cam: Option<Isometry3<f64>>,
     gyro_psd: f64,
+    /// The gyro PSD of the last covariance prediction (configured or observed, the larger),
+    /// (rad/s)²/Hz: the noise of the gyro sample in the GNSS lever-arm velocity.
+    gyro_psd_used: f64,
     noise: ProcessNoise,
     origin: Option<Lla>,
     frame: Option<LocalFrame>,
@@ -64,6 +67,9 @@ pub struct Eskf {
     gravity: Option<GravityCache>,
     /// IMU samples from the horizon sample (front, already integrated) to the newest.
     imu: VecDeque<ImuSample>,
+    /// The samples already behind the horizon: [`LEVER_GYRO_HALF_WINDOW_NS`] of them (50 at
+    /// 1 kHz), [`MAX_IMU_BEHIND`] at most whatever the rate.
+    imu_behind: VecDeque<ImuSample>,
     x: Option<Nominal>,
     p: Cov,
     acc: CovAccum,
@@ -100,6 +106,9 @@ pub struct Eskf {
     corrected: bool,
     lla: Option<crate::output::LlaLinearizer>,
 }
+
+/// Most samples kept behind the horizon for the lever-arm gyro window (≈ 13 kB).
+const MAX_IMU_BEHIND: usize = 128;
 
 /// 1-σ of the specific force a clipped accelerometer axis may have missed, m/s² (PX4 uses
 /// 4.9 m/s² of accelerometer noise for bad-accelerometer intervals; clipping is worse).
@@ -178,12 +187,14 @@ impl Eskf {
                 .unwrap_or_else(Vector3::zeros),
             body_from_cam: config.camera.as_ref().map(|c| c.body_from_cam),
             gyro_psd: noise.gyro_psd,
+            gyro_psd_used: noise.gyro_psd,
             noise,
             origin,
             frame: None,
             w_ie: Vector3::zeros(),
             gravity: None,
             imu: VecDeque::new(),
+            imu_behind: VecDeque::new(),
             x: None,
             p: Cov::zeros(),
             acc: CovAccum::default(),
@@ -393,7 +404,18 @@ impl Eskf {
         let bg = self.x.as_ref().map_or_else(Vector3::zeros, |x| x.bg);
         let m = mean_of(&a, &b);
         self.yaw_est.predict(&(m.gyro - bg), &m.accel, dt_s);
-        self.imu.pop_front();
+        if let Some(done) = self.imu.pop_front() {
+            // Kept for the lever-arm gyro window around a fix at the horizon.
+            self.imu_behind.push_back(done);
+            while self.imu_behind.len() > MAX_IMU_BEHIND
+                || self
+                    .imu_behind
+                    .front()
+                    .is_some_and(|s| done.t_ns - s.t_ns > LEVER_GYRO_HALF_WINDOW_NS)
+            {
+                self.imu_behind.pop_front();
+            }
+        }
         if self.x.is_none() {
             self.init.add_imu(
                 b.t_ns,
@@ -474,6 +496,7 @@ impl Eskf {
             accel_psd: self.noise.accel_psd.max(self.acc.accel_var / dt),
             ..self.noise
         };
+        self.gyro_psd_used = noise.gyro_psd;
         ErrorDynamics::new(x, &mean, &self.w_ie, self.params.gnss_pos_tau_s).propagate(
             &mut self.p,
             dt,
@@ -505,7 +528,19 @@ impl Eskf {
         }
         self.flush_cov();
         match e {
-            Event::Gnss(m) => self.fuse_gnss(&m, &interp(a, b, m.t_ns)),
+            Event::Gnss(m) => {
+                // The lever-arm rate: the gyro around the fix, with its white-noise variance per
+                // axis (PSD / interval / samples averaged).
+                let (gyro, n) = lever_gyro(self.imu_behind.iter().chain(self.imu.iter()), m.t_ns)
+                    .unwrap_or((interp(a, b, m.t_ns).gyro_radps, 1));
+                let dt_s = (b.t_ns - a.t_ns) as f64 * 1e-9;
+                let gyro_var = if dt_s > 0.0 {
+                    self.gyro_psd_used / dt_s / n as f64
+                } else {
+                    0.0
+                };
+                self.fuse_gnss(&m, &gyro, gyro_var);
+            }
             Event::Mag(t, m_b) => self.fuse_mag(t, &m_b),
             Event::Baro(t, pressure) => self.fuse_baro(t, pressure),
             Event::CloneAt(t) => self.take_clone(t),
@@ -563,7 +598,7 @@ impl Eskf {
         self.inject(dx);
     }
 
-    fn fuse_gnss(&mut self, m: &GnssMeas, imu: &ImuSample) {
+    fn fuse_gnss(&mut self, m: &GnssMeas, gyro_b: &Vector3<f64>, gyro_var_radps2: f64) {
         self.feed_yaw_estimator(m);
         self.manage_heading(m);
         self.gnss_vel.observe(m, &self.params.gnss_vel_consistency);
@@ -593,7 +628,8 @@ impl Eskf {
             &x,
             &mut self.p,
             &self.lever_b,
-            &imu.gyro_radps,
+            gyro_b,
+            gyro_var_radps2,
             &self.w_ie,
             m,
             gate,
@@ -624,6 +660,7 @@ impl Eskf {
             joint: self.params.vision_joint_update,
             cov_scale: self.params.vision_cov_scale,
             gate_sigma: self.params.gate_sigma,
+            scale: self.plane_scale(&x, &bfc, m),
         };
         match x.clone {
             Some(c0) if c0.t_ns == m.t0_ns && use_.joint && use_.rotation && use_.translation => {
@@ -655,6 +692,25 @@ impl Eskf {
             clear_clone(&mut self.p);
             self.take_clone(m.t1_ns);
         }
+    }
+
+    /// The scale reference of a plane-scaled metric translation: the solver's distance against
+    /// the clone camera's height above the configured terrain (the same Earth-surface model the
+    /// motion prior used).
+    fn plane_scale(
+        &self,
+        x: &Nominal,
+        body_from_cam: &Isometry3<f64>,
+        m: &Egomotion,
+    ) -> Option<PlaneScale> {
+        let (Some(prior_distance_m), Some(c0), Some(frame)) =
+            (m.scale_distance_m, x.clone, self.frame.as_ref())
+        else {
+            return None;
+        };
+        let centre = c0.p + c0.q * body_from_cam.translation.vector;
+        let distance_m = frame.ned_to_lla(&centre).alt_m - self.config.terrain_elevation_m;
+        PlaneScale::new(prior_distance_m, distance_m)
     }
 
     fn buffer_needs_clone(&self, t0_ns: i64) -> bool {

@@ -17,6 +17,11 @@ pub struct Oracle {
     pub dir_sigma_rad: f64,
     /// Relative noise of a metric translation (None = direction only).
     pub metric_rel_sigma: Option<f64>,
+    /// Scales the metric translation as the plane solver does, by the filter's own distance to
+    /// the terrain (its motion prior at delivery) over the true one: `Some(true)` also reports
+    /// that distance (`Egomotion::scale_distance_m`), `Some(false)` hides it. Needs
+    /// `metric_rel_sigma`.
+    pub plane_scaled: Option<bool>,
     /// Delivery latency after frame 1, ns.
     pub latency_ns: i64,
     /// Seed.
@@ -29,6 +34,7 @@ impl Default for Oracle {
             rot_sigma_rad: 0.01f64.to_radians(),
             dir_sigma_rad: 1f64.to_radians(),
             metric_rel_sigma: None,
+            plane_scaled: None,
             latency_ns: 40_000_000,
             seed: 7,
         }
@@ -93,6 +99,7 @@ pub fn synth_egomotion(
         cam1_from_cam0: rot,
         t_dir_cam1: Some(Unit::new_normalize(dir)),
         t_cam1_m: t_m,
+        scale_distance_m: None,
         rot_cov,
         t_cov,
         joint_cov: joint,
@@ -136,16 +143,21 @@ pub fn run(flight: &Flight, cfg: &RunCfg) -> Vec<PoseOutput> {
         vc.camera = None;
     }
     let mut est = Estimator::new(&vc, cfg.params.clone(), Some(flight.origin()));
-    let mut egos: Vec<(i64, Egomotion)> = Vec::new();
+    // (delivery time, egomotion, true camera-0 distance to the terrain)
+    let mut egos: Vec<(i64, Egomotion, f64)> = Vec::new();
     if let Some(o) = cfg.vision {
         let mut rng = Rng::derive(o.seed, "oracle-egomotion");
         let n = flight.camera_times_ns().len();
+        let frame = uavnav_core::LocalFrame::new(flight.origin());
+        let bfc = flight.body_from_cam();
         for k in 1..n {
             let (Some(a), Some(b)) = (flight.camera_truth(k - 1), flight.camera_truth(k)) else {
                 continue;
             };
             let m = synth_egomotion(flight, a, b, &o, &mut rng);
-            egos.push((b.t_ns + o.latency_ns, m));
+            let centre = a.pos_ned_m + a.nav_from_body * bfc.translation.vector;
+            let d = frame.ned_to_lla(&centre).alt_m - vc.terrain_elevation_m;
+            egos.push((b.t_ns + o.latency_ns, m, d));
         }
     }
     let gnss = if cfg.gnss {
@@ -161,7 +173,17 @@ pub fn run(flight: &Flight, cfg: &RunCfg) -> Vec<PoseOutput> {
             gi += 1;
         }
         while ei < egos.len() && egos[ei].0 <= s.t_ns {
-            est.push_egomotion(&egos[ei].1).unwrap();
+            let (_, m, d_true) = &egos[ei];
+            let mut m = m.clone();
+            if let (Some(report), Some(t)) = (cfg.vision.and_then(|o| o.plane_scaled), m.t_cam1_m) {
+                let d_hat = est.motion_prior(m.t0_ns, m.t1_ns).ground_distance_m;
+                if let Some(d_hat) = d_hat {
+                    m.t_cam1_m = Some(t * (d_hat / d_true));
+                    m.scale_distance_m = report.then_some(d_hat);
+                    m.solver = EgomotionSolver::Plane;
+                }
+            }
+            est.push_egomotion(&m).unwrap();
             ei += 1;
         }
         if let Some(o) = est.push_imu(s).unwrap() {
