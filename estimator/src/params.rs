@@ -90,6 +90,16 @@ pub struct EstimatorParams {
     /// 1e-7) makes the gyro-integrated attitude overconfident, so that the video pseudo-attitude
     /// and the lever-arm GNSS hardly correct it.
     pub paper_gyro_instability_psd: f64,
+    /// Paper profile: correlation time of the attitude error as the position/velocity filters see
+    /// it through the specific force, s. The paper's split into an attitude filter and
+    /// position/velocity filters drops their cross-covariance, so the attitude's uncertainty
+    /// enters eqs. (29)–(30) as acceleration noise `|f|² σ_θ²`. Taken as white, it grows the
+    /// velocity σ as `|f| σ_θ √t`, while the attitude error it stands for is slowly varying (the
+    /// gyro bias, the video chain): the velocity error then grows as `|f| σ_θ t` (0.15° of tilt
+    /// gives 3 m/s over a 120 s outage, where a white allowance gave 0.3 m/s). A first-order
+    /// Gauss–Markov error of variance σ² and time constant τ has the long-run PSD `2 σ² τ`, used
+    /// here. 0 gives the earlier white allowance (`|f|² σ_θ²` as PSD).
+    pub paper_attitude_error_tau_s: f64,
     /// Paper profile: the video pseudo-attitude (eq. 34) starts from the filter's attitude only
     /// once every attitude σ is below this, rad (the "initial known value").
     pub paper_video_start_sigma_rad: f64,
@@ -183,6 +193,7 @@ impl Default for EstimatorParams {
             use_vision_translation: true,
             vision_joint_update: true,
             paper_gyro_instability_psd: 7e-7,
+            paper_attitude_error_tau_s: 60.0,
             paper_video_start_sigma_rad: 0.5f64.to_radians(),
             paper_chain_cov_scale: 6.0,
             paper_video_direction: true,

@@ -16,6 +16,7 @@
 //! (vision solver), `--vision-cov-scale K`, `--joint` / `--separate` (estimator),
 //! `--gyro-instability-psd Q` (paper profile: overrides `EstimatorParams::paper_gyro_instability_psd`,
 //! whose default is derived from the simulated IMU; the paper table uses the default),
+//! `--attitude-error-tau S` (paper: `EstimatorParams::paper_attitude_error_tau_s`),
 //! `--chain-cov-scale K` (paper: `EstimatorParams::paper_chain_cov_scale`), `--direction-cov-scale K`
 //! (paper: `EstimatorParams::paper_direction_cov_scale`), `--no-video-direction`
 //! (paper: `EstimatorParams::paper_video_direction = false`, the paper's VIDEO-IMU(1) as written).
@@ -56,6 +57,7 @@ struct Args {
     pixel_sigma_px: Option<f64>,
     vision_cov_scale: Option<f64>,
     metric_scale_sigma: Option<f64>,
+    attitude_error_tau_s: Option<f64>,
     joint: Option<bool>,
     normal_sigma_deg: Option<f64>,
     gyro_instability_psd: Option<f64>,
@@ -84,6 +86,7 @@ fn parse_args() -> Args {
         pixel_sigma_px: None,
         vision_cov_scale: None,
         metric_scale_sigma: None,
+        attitude_error_tau_s: None,
         joint: None,
         normal_sigma_deg: None,
         gyro_instability_psd: None,
@@ -115,6 +118,9 @@ fn parse_args() -> Args {
             "--separate" => a.joint = Some(false),
             "--gyro-instability-psd" => {
                 a.gyro_instability_psd = it.next().and_then(|s| s.parse().ok());
+            }
+            "--attitude-error-tau" => {
+                a.attitude_error_tau_s = it.next().and_then(|s| s.parse().ok());
             }
             "--chain-cov-scale" => a.chain_cov_scale = it.next().and_then(|s| s.parse().ok()),
             "--direction-cov-scale" => {
@@ -396,6 +402,9 @@ fn main() {
     }
     if let Some(q) = args.gyro_instability_psd {
         params.estimator.paper_gyro_instability_psd = q;
+    }
+    if let Some(t) = args.attitude_error_tau_s {
+        params.estimator.paper_attitude_error_tau_s = t;
     }
     if let Some(k) = args.chain_cov_scale {
         params.estimator.paper_chain_cov_scale = k;

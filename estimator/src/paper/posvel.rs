@@ -156,6 +156,29 @@ impl PosVelEkf {
         }
     }
 
+    /// Keeps the velocity variance along the unit vector `u` at least `var`, by adding the
+    /// difference along `u` only (a rank-1 positive term: the covariance stays positive
+    /// definite).
+    pub fn floor_velocity_along(&mut self, u: &Vector3<f64>, var: f64) {
+        let pv = self.p.fixed_view::<3, 3>(3, 3).into_owned();
+        let have = (u.transpose() * pv * u)[(0, 0)];
+        if have < var {
+            let add = u * u.transpose() * (var - have);
+            let mut block = self.p.fixed_view_mut::<3, 3>(3, 3);
+            block += add;
+        }
+    }
+
+    /// Keeps the variance of each position axis `k` at least `var[k]` (diagonal terms raised:
+    /// the covariance stays positive definite).
+    pub fn floor_position(&mut self, var: &Vector3<f64>) {
+        for k in 0..3 {
+            if self.p[(k, k)] < var[k] {
+                self.p[(k, k)] = var[k];
+            }
+        }
+    }
+
     /// Eq. (35): a velocity measurement from the video direction times the last valid speed.
     pub fn update_velocity(
         &mut self,
