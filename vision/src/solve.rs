@@ -2,8 +2,8 @@
 //!
 //! Rule (documented in [`Method`]):
 //! 1. fit a pure rotation robustly; if the median residual parallax after it is below
-//!    `static_parallax_px`, the camera did not translate measurably → `RotationOnly`,
-//!    `t_dir_cam1 = None`;
+//!    `static_parallax_px`, and the prior's translation does not move the ground by more than
+//!    that either, the camera did not translate measurably → `RotationOnly`, `t_dir_cam1 = None`;
 //! 2. `Plane` when asked, or under `Auto` when the prior has a ground normal and distance and the
 //!    plane model explains at least `plane_min_inlier_fraction` of the tracks;
 //! 3. otherwise the paper's `Essential` solver (8-point in RANSAC+LO, Huang–Faugeras,
@@ -179,7 +179,18 @@ pub fn solve(
     } else {
         0.0
     };
-    if median_parallax * focal_px < p.static_parallax_px {
+    // Over a flat ground a small translation moves the image almost as a rotation does (the
+    // plane-induced flow `t nᵀx / d` is nearly uniform near the optical axis), so a rotation
+    // fit absorbs it and leaves little residual parallax: the "rotation" is then off by about
+    // `|t| / d` while its covariance, from the residuals of ~200 points, claims far less
+    // (a simulated hovering multirotor: rotation NEES median 9.8 for 3, 40 % of them gated, the
+    // attitude 91 % within 3σ). When the prior predicts a translation that moves the ground by
+    // more than the threshold, the plane solver, which estimates both, is used instead.
+    let ground_flow_px = match (prior.t_cam1_m, prior.ground_distance_m) {
+        (Some(t), Some(d)) if d.is_finite() && d > 0.0 => t.norm() / d * focal_px,
+        _ => 0.0,
+    };
+    if median_parallax * focal_px < p.static_parallax_px && ground_flow_px < p.static_parallax_px {
         if s.inliers.len() < p.min_inliers {
             return Err(NoMeasurement::TooFewInliers {
                 inliers: s.inliers.len() as u32,
