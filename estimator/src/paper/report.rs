@@ -1,0 +1,120 @@
+//! What the `paper` profile tells the outside: the motion prior for the vision front end, its
+//! health and the pose output (with the stated σ the split filters cannot know by themselves).
+
+use super::*;
+
+impl PaperFilter {
+    /// Motion prior from the gyro samples and the attitude filter.
+    pub fn motion_prior(&self, t0_ns: i64, t1_ns: i64, terrain_elevation_m: f64) -> MotionPrior {
+        let (Some(bfc), Some(att), Some(gi), Some(frame)) = (
+            self.body_from_cam,
+            self.att.as_ref(),
+            self.gps_imu.as_ref(),
+            self.frame.as_ref(),
+        ) else {
+            return MotionPrior::default();
+        };
+        let pv = self.vio2.as_ref().unwrap_or(gi);
+        let now = crate::motion_prior::NowState {
+            t_ns: att.t_ns,
+            q: att.quaternion(),
+            p: pv.x,
+            v: pv.v,
+            bg: Vector3::zeros(),
+        };
+        crate::motion_prior::prior(
+            &self.imu,
+            &bfc,
+            frame,
+            &now,
+            t0_ns,
+            t1_ns,
+            terrain_elevation_m,
+            self.gyro_psd.sqrt(),
+            0.0,
+        )
+    }
+
+    /// Whether the filters' covariance diagonals are finite (a NaN variance would be reported
+    /// as a σ of 0).
+    pub fn covariance_finite(&self) -> bool {
+        let att = self
+            .att
+            .as_ref()
+            .is_none_or(|a| (0..3).all(|k| a.p[(k, k)].is_finite()));
+        let pv = [&self.gps_imu, &self.vio2]
+            .into_iter()
+            .flatten()
+            .all(|f| (0..6).all(|k| f.p[(k, k)].is_finite()));
+        att && pv
+    }
+
+    /// Health (mode from the filters' activity).
+    pub fn health(&self) -> Health {
+        let mut h = self.health;
+        h.divergence_resets = self.divergence_resets;
+        let t = self.imu.back().map(|s| s.t_ns).unwrap_or(0);
+        let to = self.params.aid_timeout_ns;
+        h.mode = match (&self.att, &self.gps_imu) {
+            (Some(_), Some(gi)) if !gi.x.iter().all(|v| v.is_finite()) => Mode::Diverged,
+            (Some(_), Some(_)) if h.gnss_pos.active(t, to) => Mode::Nominal,
+            (Some(_), Some(_)) if self.vio2.is_some() && h.vision_trans.active(t, to) => {
+                Mode::GnssDeniedVision
+            }
+            (Some(_), Some(_)) => Mode::InertialOnly,
+            _ => Mode::Initialising,
+        };
+        if let (Some(att), Some(gi)) = (&self.att, &self.gps_imu) {
+            let pv = self.vio2.as_ref().unwrap_or(gi);
+            for k in 0..6 {
+                h.cov_diag[k] = pv.p[(k, k)];
+            }
+            for k in 0..3 {
+                h.cov_diag[6 + k] = att.p[(k, k)];
+            }
+        }
+        h
+    }
+
+    pub(super) fn output(&self, t_ns: i64) -> Option<PoseOutput> {
+        let (Some(att), Some(gi), Some(frame)) = (
+            self.att.as_ref(),
+            self.gps_imu.as_ref(),
+            self.frame.as_ref(),
+        ) else {
+            return None;
+        };
+        let pv = self.vio2.as_ref().unwrap_or(gi);
+        let mut pos_cov = pv.p.fixed_view::<3, 3>(0, 0).into_owned();
+        if self.vio2.is_none() {
+            // GPS-IMU averages the fixes as white: what it states includes their correlated
+            // part, which no averaging removes (see `gnss_correlated_var`).
+            for k in 0..3 {
+                pos_cov[(k, k)] = pos_cov[(k, k)].max(self.gnss_correlated_var[k]);
+            }
+        }
+        let h = self.health();
+        let to = self.params.aid_timeout_ns;
+        let sd = |m: &Matrix3<f64>| m.diagonal().map(|v| v.max(0.0).sqrt());
+        Some(PoseOutput {
+            t_ns,
+            lla: frame.ned_to_lla(&pv.x),
+            pos_ned_m: pv.x,
+            vel_ned_mps: pv.v,
+            nav_from_body: att.quaternion(),
+            euler_rad: att.euler,
+            sigma_pos_ned_m: sd(&pos_cov),
+            sigma_vel_mps: sd(&pv.p.fixed_view::<3, 3>(3, 3).into_owned()),
+            sigma_att_rad: sd(&att.p_euler()),
+            gyro_bias_radps: Vector3::zeros(),
+            accel_bias_mps2: Vector3::zeros(),
+            health: (&h).into(),
+            aiding: AidingFlags {
+                gnss_pos: h.gnss_pos.active(t_ns, to),
+                gnss_vel: h.gnss_vel.active(t_ns, to),
+                vision_rot: h.vision_rot.active(t_ns, to),
+                vision_trans: h.vision_trans.active(t_ns, to),
+            },
+        })
+    }
+}
