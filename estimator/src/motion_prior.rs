@@ -118,6 +118,17 @@ fn carry_back(
     })
 }
 
+/// Distance from a camera centre (local NED, m) down to the terrain of the Earth-surface model
+/// (the ellipsoid at `terrain_elevation_m`), m: the `d` of the plane solver, used both for the
+/// prior and for the estimator's model of the plane-scaled translation (eq. V2).
+pub fn terrain_distance_m(
+    frame: &LocalFrame,
+    centre_ned_m: &Vector3<f64>,
+    terrain_elevation_m: f64,
+) -> f64 {
+    frame.ned_to_lla(centre_ned_m).alt_m - terrain_elevation_m
+}
+
 /// Builds the prior: gyro rotation `cam1_from_cam0`, the ground normal and distance in camera 0
 /// (flat terrain at `terrain_elevation_m` above the ellipsoid), and `t` from the velocity.
 #[allow(clippy::too_many_arguments)]
@@ -154,7 +165,7 @@ pub fn prior(
     prior.ground_normal_cam0 = Some(Unit::new_normalize(n_cam0));
     let t_bc = body_from_cam.translation.vector;
     let p0 = now.p - now.v * ((now.t_ns - t0_ns) as f64 * 1e-9);
-    let h = frame.ned_to_lla(&(p0 + c0 * t_bc)).alt_m - terrain_elevation_m;
+    let h = terrain_distance_m(frame, &(p0 + c0 * t_bc), terrain_elevation_m);
     if h > 0.0 {
         prior.ground_distance_m = Some(h);
     }

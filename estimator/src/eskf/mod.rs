@@ -709,7 +709,11 @@ impl Eskf {
             return None;
         };
         let centre = c0.p + c0.q * body_from_cam.translation.vector;
-        let distance_m = frame.ned_to_lla(&centre).alt_m - self.config.terrain_elevation_m;
+        let distance_m = crate::motion_prior::terrain_distance_m(
+            frame,
+            &centre,
+            self.config.terrain_elevation_m,
+        );
         PlaneScale::new(prior_distance_m, distance_m)
     }
 
