@@ -277,3 +277,43 @@ fn estimate_a_mavlink_telemetry_log() {
         assert!(!r.contains("NaN") && !r.contains("inf"), "{r}");
     }
 }
+
+#[test]
+fn estimate_leaves_out_the_sources_asked() {
+    let Some(root) = uavnav_tests::shared_data("real_flights") else {
+        return;
+    };
+    let raw = root.join("raw/erle_copter_218.BIN");
+    let raw = raw.to_str().expect("path");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = |name: &str| dir.path().join(name).to_str().expect("path").to_owned();
+    let (all, no_mag, report) = (path("all.csv"), path("no_mag.csv"), path("report"));
+    let out = run(&["estimate", raw, "--out", &all]);
+    assert_eq!(out.status.code(), Some(0));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("IMU+GNSS+mag"));
+    let out = run(&[
+        "estimate",
+        raw,
+        "--no-mag",
+        "--no-baro",
+        "--out",
+        &no_mag,
+        "--report",
+        &report,
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // Neither fused nor listed as read, and the heading comes from elsewhere.
+    let md = std::fs::read_to_string(dir.path().join("report/accuracy.md")).expect("md");
+    assert!(md.contains("eskf, IMU+GNSS |"), "{md}");
+    let (a, b) = (
+        rows(dir.path().join("all.csv").as_path()),
+        rows(dir.path().join("no_mag.csv").as_path()),
+    );
+    assert!(a.len() > 10_000 && b.len() > 10_000);
+    assert_ne!(a, b);
+}

@@ -27,6 +27,12 @@ pub struct Args {
     /// Do not use GNSS (inertial, plus vision when present).
     #[arg(long)]
     pub no_gnss: bool,
+    /// Do not use the magnetometer (the heading then comes from the yaw-hypothesis bank).
+    #[arg(long)]
+    pub no_mag: bool,
+    /// Do not use the barometer.
+    #[arg(long)]
+    pub no_baro: bool,
     /// Output CSV: one row per IMU sample once initialised.
     #[arg(long)]
     pub out: PathBuf,
@@ -101,21 +107,49 @@ pub struct Comparison {
     pub samples: Vec<TruthSample>,
 }
 
+/// What one offline run uses: the profile, the sources, the options.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RunChoice {
+    /// Filter profile.
+    pub profile: FilterProfile,
+    /// Camera frames.
+    pub use_vision: bool,
+    /// GNSS fixes.
+    pub use_gnss: bool,
+    /// Magnetometer samples.
+    pub use_mag: bool,
+    /// Barometer samples.
+    pub use_baro: bool,
+}
+
+impl RunChoice {
+    /// The choice the command line makes.
+    pub fn from_args(args: &Args) -> Self {
+        Self {
+            profile: args.profile,
+            use_vision: !args.no_vision,
+            use_gnss: !args.no_gnss,
+            use_mag: !args.no_mag,
+            use_baro: !args.no_baro,
+        }
+    }
+}
+
 /// Runs one dataset through a [`VehicleRunner`] with vision inline; calls `sink` per pose.
 pub fn run_dataset(
     path: &Path,
     read: &uavnav_dataset::ReadOptions,
-    profile: FilterProfile,
-    use_vision: bool,
-    use_gnss: bool,
+    choice: RunChoice,
     mut sink: impl FnMut(&PoseOutput) -> anyhow::Result<()>,
 ) -> Result<(RunOutput, Option<Comparison>), CliError> {
     let ds = uavnav_dataset::Dataset::open_with(path, read).map_err(crate::common::open_error)?;
     let mut config = ds.config().clone();
-    config.profile = profile;
+    config.profile = choice.profile;
     let params = RunnerParams {
-        use_vision,
-        use_gnss,
+        use_vision: choice.use_vision,
+        use_gnss: choice.use_gnss,
+        use_mag: choice.use_mag,
+        use_baro: choice.use_baro,
         ..RunnerParams::default()
     };
     // The local frame is fixed at the first GNSS fix, exactly as in the service, so that the same
@@ -145,6 +179,12 @@ pub fn run_dataset(
         let ev = ev.map_err(CliError::input)?;
         if let SensorEvent::Gnss(g) = &ev {
             out.gnss_t_ns.push(g.t_ns);
+        }
+        // A source left out is not fed at all, so that the run's label does not list it as read.
+        match &ev {
+            SensorEvent::Mag(_) if !choice.use_mag => continue,
+            SensorEvent::Baro(_) if !choice.use_baro => continue,
+            _ => {}
         }
         // Counted only when the estimator accepts the input.
         let mut fed = out.fed;
@@ -195,9 +235,7 @@ pub fn run(args: Args) -> CliResult {
     let (out, comparison) = run_dataset(
         &args.dataset,
         &args.read.options(),
-        args.profile,
-        !args.no_vision,
-        !args.no_gnss,
+        RunChoice::from_args(&args),
         |p| {
             writeln!(csv, "{}", csv_row(p))?;
             if let Some(t) = tum.as_mut() {

@@ -97,9 +97,10 @@ pub fn write(dir: &Path, args: &Args, out: &RunOutput, against: &Comparison) -> 
         (comparison_out, _) = run_dataset(
             &args.dataset,
             &args.read.options(),
-            args.profile,
-            false,
-            !args.no_gnss,
+            crate::estimate::RunChoice {
+                use_vision: false,
+                ..crate::estimate::RunChoice::from_args(args)
+            },
             |_| Ok(()),
         )?;
         comparison = in_truth_frame(&comparison_out.poses, frame.as_ref());
