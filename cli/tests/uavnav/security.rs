@@ -5,8 +5,8 @@
 //! under test, and checked by rustls (webpki) in real handshakes.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-mod tls_fake;
+use crate::common;
+use crate::tls_fake;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -17,7 +17,7 @@ use prost::Message;
 use uavnav_client::pb::sensor_envelope::Payload;
 use uavnav_client::{Client, ClientError, ConnectOptions, Endpoint, Selector, TlsOptions, pb};
 
-use common::{BIN, run, run_async, stdout};
+use crate::common::{BIN, run, run_async, stdout};
 
 /// `uavnav certs init` for service `uavnavd` and ground stations gs-alpha and gs-bravo.
 fn deployment(dir: &Path, extra: &[&str]) {

@@ -3,12 +3,10 @@
 //! restart the vehicle's estimator); a different one replaces the engine.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use common::*;
+use crate::common::*;
 use uavnav_core::VehicleConfig;
 use uavnav_proto::v1 as pb;
 use uavnavd::Server;

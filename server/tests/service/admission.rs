@@ -4,11 +4,9 @@
 //! displaced.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use uavnav_proto::v1 as pb;
 
 fn status(a: &pb::IngestAck) -> pb::IngestStatus {

@@ -5,11 +5,9 @@
 //! live vehicles when it falls behind.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use uavnav_proto::keys;
 
 /// Vehicle liveliness tokens a Zenoh peer sees now.

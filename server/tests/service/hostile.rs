@@ -3,11 +3,9 @@
 //! corrupt frame body (row 5), bad compressed data (row 8) and implausible configurations (row 9).
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use tonic::codegen::{Body, Service, http};
 use uavnav_proto::v1 as pb;
 

@@ -1,11 +1,9 @@
 //! The client library against an in-process `uavnavd`: the same API over gRPC and Zenoh.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use uavnav_client::{Client, ClientError, ConnectOptions, Endpoint, Selector, pb};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -1,11 +1,9 @@
 //! Every bad-input case gets its exact status, and never disturbs another vehicle.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use prost::Message;
 use uavnav_proto::v1 as pb;
 

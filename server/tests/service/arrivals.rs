@@ -4,11 +4,9 @@
 //! counted, small messages still pass, and a stream that ends gives its share back.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use tokio::sync::mpsc;
 use tokio_stream::wrappers::ReceiverStream;
 use uavnav_proto::v1 as pb;

@@ -1,12 +1,10 @@
 //! `uavnav record` then `uavnav replay`: a recording reproduces the poses.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-
 use std::path::Path;
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use uavnav_client::{Client, Selector, pb};
 
 /// A pose as (t_ns, lat, lon, alt).

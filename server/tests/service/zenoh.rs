@@ -4,11 +4,9 @@
 //! never see each other.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use prost::Message;
 use uavnav_proto::keys::{self, Leaf};
 use uavnav_proto::v1 as pb;

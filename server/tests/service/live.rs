@@ -3,8 +3,6 @@
 //! camera image arrive on their topics with the values that were ingested.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-
 use std::collections::HashMap;
 use std::time::Duration;
 
@@ -14,7 +12,7 @@ use serde_json::Value;
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
-use common::*;
+use crate::common::*;
 
 type Ws =
     tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;

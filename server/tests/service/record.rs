@@ -4,12 +4,12 @@
 //! blocks; a full disk loses the recording, counted, and nothing else.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::time::Duration;
 
-use common::test_config;
+use crate::common::test_config;
 use uavnav_core::SensorEvent;
 use uavnav_dataset::mcap_io::reader::McapDataset;
 use uavnav_proto::v1 as pb;

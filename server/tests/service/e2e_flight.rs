@@ -3,11 +3,11 @@
 //! data: the actor's ordering, the vision pool and the transports change nothing.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
+use crate::common;
 
 use std::time::Duration;
 
-use common::test_config;
+use crate::common::test_config;
 use prost::Message;
 use uavnav_core::SensorEvent;
 use uavnav_proto::keys::{self, Leaf};

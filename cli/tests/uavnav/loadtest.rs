@@ -1,12 +1,10 @@
 //! `uavnav loadtest` and the load generator, against the service and the discarding sink.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-
 use std::sync::Arc;
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use uavnav_cli::load::{self, Live, LoadParams, Recording};
 use uavnav_client::Client;
 

@@ -2,11 +2,9 @@
 //! vehicle publishes a final health report, watch streams end, the ports close.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use uavnav_proto::v1 as pb;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -4,12 +4,10 @@
 //! vehicle with them.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use uavnav_client::{Client, ConnectOptions};
 use uavnav_tests::net::eventually;
 

@@ -4,11 +4,9 @@
 //! log-time order, per vehicle; broken and disordered files are errors that say where.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use uavnav_client::pb::sensor_envelope::Payload;
 use uavnav_client::recording::{self, RecordedMessage, RecordingError, RecordingReader};
 use uavnav_client::{Client, pb};

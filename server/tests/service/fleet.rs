@@ -2,12 +2,10 @@
 //! prefix and decimation, GetPose, configure and reset.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use uavnav_proto::v1 as pb;
 
 const VEHICLES: usize = 40;

@@ -2,11 +2,9 @@
 //! replay, watch (CSV, TUM, Foxglove live view).
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-mod common;
-
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn cli_management_subcommands() {
