@@ -111,17 +111,18 @@ fn copter_218_without_magnetometer() {
         return;
     };
     assert_eq!(s.bad_sigma_rows, 0, "{s}");
-    // Met: roll/pitch (1.34/1.01°), horizontal (0.53 m), never confidently wrong (100 % within
+    // Met: roll/pitch (1.37/1.01°), horizontal (0.55 m), never confidently wrong (100 % within
     // 3σ; 55 % before the yaw σ was floored at the yaw bank's spread). Not yet: yaw within 10°
-    // (11.4° RMSE against the autopilot's compass heading, which has its own ~4° error; 12.7°
+    // (10.8° RMSE against the autopilot's compass heading, which has its own ~4° error; 12.7°
     // before GNSS stopped correcting the yaw while the accelerations cannot tell it,
-    // `Eskf::heading_unobservable_states`). What is left is mostly one hover (205–250 s) where
-    // the filter turns 17° against the gyro in 5 s while the accelerations are just above that
-    // threshold.
+    // `Eskf::heading_unobservable_states`; 11.4° while the floor was applied to the filter's
+    // covariance rather than to the reported σ). What is left is mostly a 15° offset through the
+    // long hover (140–250 s) that the yaw bank shares: the GNSS velocity of the small
+    // accelerations before it points there.
     assert!(s.rmse_deg[0] <= 1.5 && s.rmse_deg[1] <= 1.5, "{s}");
     assert!(s.horizontal_rmse_m <= 1.5, "{s}");
     assert!(s.yaw_within_3sigma >= 0.95, "{s}");
-    assert!(s.rmse_deg[2] <= 12.5, "{s}");
+    assert!(s.rmse_deg[2] <= 11.5, "{s}");
 }
 
 #[test]

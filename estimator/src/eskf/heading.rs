@@ -74,11 +74,22 @@ impl Eskf {
             self.check_mag_against_bank(m.t_ns, gsf);
         }
         let mag_active = self.mag_fusing();
-        if self.heading_seen_by_gnss_velocity_only()
-            && let Some(sigma) = self.yaw_est.honest_sigma_rad()
-        {
-            self.floor_yaw_sigma(sigma);
-        }
+        // Without a magnetometer the heading is seen only through the GNSS velocity while the
+        // vehicle accelerates; the filter's yaw σ then shrinks on what its linear model believes,
+        // and in long hovers it grows by the gyro noise alone, while a real heading also wanders
+        // with the gyro's scale error over every yaw-in-place turn (copter_218 without its
+        // compass: σ 3–4.5° while 10–16° from the autopilot's compass heading after 824° of
+        // turning). The yaw bank sees the same data through nonlinear models, and its spread
+        // widens when they stop telling the hypotheses apart: the output does not claim to know
+        // the heading better. Only the reported σ is floored, not the filter's covariance: raised
+        // there, it made every GNSS velocity of a hover a large heading correction, and the
+        // velocity's errors turned the heading (copter_218 without its compass: 25–29° from the
+        // autopilot's heading through a 45 s hover; yaw RMSE 11.4° against 10.8° now).
+        self.yaw_sigma_floor_rad = if self.heading_seen_by_gnss_velocity_only() {
+            self.yaw_est.honest_sigma_rad().unwrap_or(0.0)
+        } else {
+            0.0
+        };
         // Emergency reset: GNSS velocity rejected for a while and the yaw estimator confidently
         // elsewhere (a heading aligned on a wrong hypothesis, or lost in a manoeuvre).
         let rejected_for = if self.gnss_vel.diag.consecutive_rejects > 0 {
@@ -112,11 +123,13 @@ impl Eskf {
     /// The error states GNSS must not correct now: the yaw, when nothing but the GNSS velocity
     /// sees the heading (no compass fused, no lever arm, no camera) and the vehicle has not
     /// accelerated enough for it to tell the heading ([`YawEstimator::heading_unobservable`]).
-    /// Why: the yaw σ is then floored at what the velocity cannot tell (`floor_yaw_sigma`), and
-    /// with that σ a hovering copter's GNSS velocity, whose errors the linear model reads as
-    /// heading information, turned the heading the wrong way (copter_218 without its compass:
-    /// +9° in 5 s of hover while the gyro turned −8°, both references following the gyro). The
-    /// yaw is then held by the gyro until the vehicle manoeuvres; its σ keeps growing honestly.
+    /// Why: a hovering copter's GNSS velocity, whose errors the linear model reads as heading
+    /// information, turned the heading the wrong way (copter_218 without its compass: +9° in 5 s
+    /// of hover while the gyro turned −8°, both references following the gyro). The yaw is then
+    /// held by the gyro until the vehicle manoeuvres. (Tried and dropped: also holding it
+    /// whenever the accelerations tell the heading worse than the filter's own σ does. GNSS then
+    /// stopped correcting the heading as it wandered with the gyro, 21.6° yaw RMSE against
+    /// 10.8°.)
     ///
     /// [`YawEstimator::heading_unobservable`]: crate::yaw_estimator::YawEstimator::heading_unobservable
     pub(super) fn heading_unobservable_states(&self) -> &'static [usize] {
@@ -176,22 +189,6 @@ impl Eskf {
         self.mag.stop_contradicted();
         self.reset_yaw_to(bank);
         self.mag_contradicted_since_ns = None;
-    }
-
-    /// Without a magnetometer the heading is seen only through the GNSS velocity while the vehicle
-    /// accelerates; the main filter's yaw σ then shrinks on what its linear model believes, and in
-    /// long hovers it grows by the gyro noise alone, while a real heading also wanders with the
-    /// gyro's scale error over every yaw-in-place turn (copter_218 without its compass: σ 3–4.5°
-    /// while 10–16° from the autopilot's compass heading after 824° of turning). The yaw bank sees
-    /// the same data through a bank of nonlinear models, and its spread widens when they stop
-    /// telling the hypotheses apart: the main filter does not claim to know the heading better.
-    /// Only the yaw variance is raised, so the covariance stays positive semi-definite.
-    fn floor_yaw_sigma(&mut self, sigma_rad: f64) {
-        let i = ITH + 2;
-        let floor = sigma_rad * sigma_rad;
-        if self.p[(i, i)] < floor {
-            self.p[(i, i)] = floor;
-        }
     }
 
     /// After a heading alignment late in a flight: what the filter learnt of the horizontal

@@ -77,6 +77,9 @@ pub struct Eskf {
     init: Initialiser,
     yaw_aligned: bool,
     heading: HeadingSource,
+    /// The least yaw σ the output may claim, rad: what a heading seen only through the GNSS
+    /// velocity can honestly claim (`manage_heading`), 0 when something else sees the heading.
+    yaw_sigma_floor_rad: f64,
     gnss_pos: GnssPosSource,
     gnss_vel: GnssVelSource,
     body_from_mag: Option<UnitQuaternion<f64>>,
@@ -201,6 +204,7 @@ impl Eskf {
             buffer: DelayBuffer::default(),
             init: Initialiser::default(),
             yaw_aligned: false,
+            yaw_sigma_floor_rad: 0.0,
             heading: HeadingSource::Unknown,
             gnss_pos: GnssPosSource::default(),
             gnss_vel: GnssVelSource::default(),

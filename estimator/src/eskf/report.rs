@@ -98,7 +98,8 @@ impl Eskf {
             )
             .map(|v| v.max(0.0).sqrt())
         };
-        let cov_th: Matrix3<f64> = self.p.fixed_view::<3, 3>(ITH, ITH).into_owned();
+        let mut cov_th: Matrix3<f64> = self.p.fixed_view::<3, 3>(ITH, ITH).into_owned();
+        cov_th[(2, 2)] = cov_th[(2, 2)].max(self.yaw_sigma_floor_rad.powi(2));
         let (r, p_, y) = o.q.euler_angles();
         Some(PoseOutput {
             t_ns: o.t_ns,

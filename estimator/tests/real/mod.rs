@@ -82,6 +82,10 @@ impl RealFlight {
         config.imu.accel_random_walk = y("imu0", "accelerometer_random_walk").unwrap_or(1e-3);
         config.gnss = Some(GnssConfig {
             rate_hz: y("gnss0", "rate_hz").unwrap_or(5.0),
+            // `uavnav convert` keeps a log's fix stamps and states the receiver's delay here (the
+            // shared flights have theirs taken off the stamps instead): without it, a converted
+            // flight's fixes were fused as valid when they arrived.
+            delay_ns: y("gnss0", "delay_s").map_or(0, |d| (d * 1e9).round() as i64),
             ..GnssConfig::default()
         });
         config.camera = None;
