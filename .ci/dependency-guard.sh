@@ -5,7 +5,10 @@
 # - the client library (what a ground-station backend adds) reaches any crate of ours other than
 #   the wire contract (uavnav-proto, and uavnav-core through it) — the service, the simulator, the
 #   vision front end, the estimator, the runner, the report, the datasets, the CLI — or plotters,
-#   with its default features (the superset: zenoh and recording).
+#   with its default features (the superset: zenoh and recording);
+# - the tests of a crate below the service (pure crates, datasets, logs, report) link the service
+#   or zenoh: they would wait for them to build and link them into every test binary (the real-data
+#   tests find their data through `uavnav-testdata`, not the service's test kit).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 status=0
@@ -30,5 +33,13 @@ if [ -n "$bad" ]; then
     echo "dependency guard: the client library uavnav-client reaches: $(echo $bad | tr '\n' ' ')(allowed of ours: uavnav-proto, uavnav-core)" >&2
     status=1
 fi
-[ "$status" -eq 0 ] && echo "dependency guard: the pure crates reach no tokio, tonic, prost or zenoh; uavnav-client reaches no crate of ours beyond uavnav-proto and uavnav-core, and no plotters"
+for crate in uavnav-core uavnav-sim uavnav-vision uavnav-estimator uavnav-runner uavnav-dataset uavnav-logs uavnav-report; do
+    tree=$(cargo tree -p "$crate" -e normal,dev --prefix none --locked) || exit 1
+    bad=$(printf '%s\n' "$tree" | awk '{print $1}' | sort -u | grep -xE 'uavnavd|uavnav-tests|zenoh' || true)
+    if [ -n "$bad" ]; then
+        echo "dependency guard: the tests of $crate reach: $(echo $bad | tr '\n' ' ')" >&2
+        status=1
+    fi
+done
+[ "$status" -eq 0 ] && echo "dependency guard: the pure crates reach no tokio, tonic, prost or zenoh; uavnav-client reaches no crate of ours beyond uavnav-proto and uavnav-core, and no plotters; the tests below the service link no service or zenoh"
 exit "$status"

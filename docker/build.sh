@@ -8,8 +8,12 @@
 #   --no-pull     no registry: the binaries are built on this host with cargo, then an image is
 #                 assembled FROM scratch with them, the shared libraries `ldd` lists (with the dynamic
 #                 loader), /etc/passwd with a non-root user, the configs and scenarios. (default)
-#   --profile P   cargo profile of the --no-pull binaries: release (default) or dev (reuses the
-#                 target/debug binaries `cargo test --workspace` already built, so CI compiles once).
+#   --profile P   cargo profile of the --no-pull binaries: release (default) or dev. dev builds
+#                 them as `cargo test --workspace` does (`--no-run`), so after the README's test
+#                 command it compiles nothing (CI). `cargo build -p uavnavd -p uavnav-cli` would
+#                 not reuse them: the workspace's test build unifies tokio's `test-util` (the test
+#                 kit's) into the dependency graph, and a build of the two packages alone rebuilt
+#                 tokio, zenoh, tonic and the service in the middle of CI.
 #   --tag IMAGE   image name (default uavnav:latest, what docker/compose.yaml runs).
 #   --no-cargo    --no-pull only: do not run cargo, use the binaries already in the target dir.
 #
@@ -67,8 +71,13 @@ fi
 target_dir=${CARGO_TARGET_DIR:-$root/target}
 bin_dir=$target_dir/$profile_dir
 if [ "$run_cargo" = 1 ]; then
-    echo "build.sh: cargo build --profile $profile -p uavnavd -p uavnav-cli (target dir $target_dir)"
-    (cd "$root" && cargo build --locked --profile "$profile" -p uavnavd -p uavnav-cli)
+    if [ "$profile" = dev ]; then
+        echo "build.sh: cargo test --workspace --no-run (the test build's binaries; target dir $target_dir)"
+        (cd "$root" && cargo test --locked --workspace --no-run)
+    else
+        echo "build.sh: cargo build --profile $profile -p uavnavd -p uavnav-cli (target dir $target_dir)"
+        (cd "$root" && cargo build --locked --profile "$profile" -p uavnavd -p uavnav-cli)
+    fi
 fi
 for b in uavnavd uavnav; do
     [ -x "$bin_dir/$b" ] || { echo "build.sh: $bin_dir/$b missing (build it, or drop --no-cargo)" >&2; exit 1; }

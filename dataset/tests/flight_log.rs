@@ -36,7 +36,7 @@ fn events(ds: &Dataset) -> (Counts, Vec<SensorEvent>) {
 
 #[test]
 fn ardupilot_log_is_a_dataset_with_a_reference_not_truth() {
-    let Some(root) = uavnav_tests::shared_data("real_flights") else {
+    let Some(root) = uavnav_testdata::shared_data("real_flights") else {
         return;
     };
     let raw = root.join("raw/erle_copter_218.BIN");
@@ -116,7 +116,7 @@ fn ardupilot_log_is_a_dataset_with_a_reference_not_truth() {
 
 #[test]
 fn a_cut_log_imports_with_a_note_naming_the_byte_offset() {
-    let Some(root) = uavnav_tests::shared_data("real_flights") else {
+    let Some(root) = uavnav_testdata::shared_data("real_flights") else {
         return;
     };
     // plane_E's logger stopped inside its last message: read up to it, with a note (corruption

@@ -308,7 +308,7 @@ fn check_flight(root: &std::path::Path, name: &str) {
 
 #[test]
 fn ardupilot_logs_match_shared_asl_conversions() {
-    let Some(root) = uavnav_tests::shared_data("real_flights") else {
+    let Some(root) = uavnav_testdata::shared_data("real_flights") else {
         return;
     };
     for name in ["erle_copter_218", "erle_copter_103", "erle_plane_E"] {

@@ -191,7 +191,7 @@ proptest! {
 
 #[test]
 fn cuts_of_the_shared_logs_are_clear_errors() {
-    let Some(root) = uavnav_tests::shared_data("") else {
+    let Some(root) = uavnav_testdata::shared_data("") else {
         return;
     };
     for f in [

@@ -7,7 +7,7 @@ use uavnav_logs::{ImportOptions, LogKind, TimeBase, VehicleKind};
 
 #[test]
 fn tlog_counts_and_values_match_pymavlink() {
-    let Some(root) = uavnav_tests::shared_data("public_flight_logs") else {
+    let Some(root) = uavnav_testdata::shared_data("public_flight_logs") else {
         return;
     };
     let log = uavnav_logs::open(
@@ -59,7 +59,7 @@ fn tlog_counts_and_values_match_pymavlink() {
 /// A radio link corrupts bytes: the reader skips what fails its checksum and never panics.
 #[test]
 fn corrupted_telemetry_never_panics() {
-    let Some(root) = uavnav_tests::shared_data("public_flight_logs") else {
+    let Some(root) = uavnav_testdata::shared_data("public_flight_logs") else {
         return;
     };
     let data = std::fs::read(root.join("ardupilot_vtol_sitl.tlog")).unwrap();

@@ -6,7 +6,7 @@ use uavnav_logs::{ImportOptions, LogKind};
 
 #[test]
 fn ulog_counts_match_the_readme() {
-    let Some(root) = uavnav_tests::shared_data("public_flight_logs") else {
+    let Some(root) = uavnav_testdata::shared_data("public_flight_logs") else {
         return;
     };
     for (file, imu, gps, new_schema) in [

@@ -45,23 +45,8 @@ pub mod recording;
 pub mod service;
 pub mod wire;
 
-use std::path::PathBuf;
-
 pub use uavnav_proto::v1 as pb;
 
-/// `<workspace>/../shared/data/<sub>`, when present. A user's clone has no `../shared`: the
-/// caller's test then skips, and this says so on stderr with the path it looked for.
-pub fn shared_data(sub: &str) -> Option<PathBuf> {
-    let root = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"));
-    let p = root.join(sub);
-    if p.exists() {
-        Some(p)
-    } else {
-        eprintln!(
-            "skipping: {} not found (the shared real data sits beside the repository; a user's \
-             clone has none)",
-            p.display()
-        );
-        None
-    }
-}
+/// Where the shared real data is, or why a test skips (`uavnav-testdata`, which the pure crates'
+/// tests use without this kit).
+pub use uavnav_testdata::shared_data;

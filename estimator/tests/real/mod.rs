@@ -15,7 +15,8 @@ use uavnav_estimator::{Estimator, EstimatorParams, PoseOutput};
 
 /// The shared real flight `name`, or `None` (with a message) when `../shared` is absent.
 pub fn flight_dir(name: &str) -> Option<PathBuf> {
-    uavnav_tests::shared_data(&format!("real_flights/{name}")).filter(|d| d.join("mav0").is_dir())
+    uavnav_testdata::shared_data(&format!("real_flights/{name}"))
+        .filter(|d| d.join("mav0").is_dir())
 }
 
 fn rows(path: &Path) -> Vec<Vec<Option<f64>>> {

@@ -5,14 +5,12 @@
 //!
 //! Measured by the process's peak resident memory (`VmHWM`, reset through `/proc/self/clear_refs`)
 //! while the service handles the message; the same bytes decoded with plain prost in this process
-//! give the "before" figure. One test in this binary, so nothing else allocates meanwhile.
-#![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
-
-mod common;
+//! give the "before" figure. In its own process (`own_process`), so nothing else allocates
+//! meanwhile.
 
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use prost::Message;
 use uavnav_proto::v1 as pb;
 
@@ -61,6 +59,11 @@ fn envelope(id: &str, batch: &[u8]) -> Vec<u8> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_16_mib_batch_of_empty_samples_is_refused_before_it_is_decoded() {
+    if crate::own_process::ran_in_own_process(
+        "amplification::a_16_mib_batch_of_empty_samples_is_refused_before_it_is_decoded",
+    ) {
+        return;
+    }
     let mut cfg = test_config();
     let endpoint = listen_zenoh(&mut cfg);
     let max = cfg.grpc.max_message_bytes;
