@@ -97,14 +97,7 @@ async fn a_16_mib_batch_of_empty_samples_is_refused_before_it_is_decoded() {
     assert!(ack.reason.contains("more than 10000"), "{ack:?}");
 
     // Zenoh: the same batch on the vehicle's imu key.
-    let mut zc = zenoh::Config::default();
-    zc.insert_json5("mode", "\"peer\"").unwrap();
-    zc.insert_json5("listen/endpoints", "[]").unwrap();
-    zc.insert_json5("connect/endpoints", &format!("[\"{endpoint}\"]"))
-        .unwrap();
-    zc.insert_json5("scouting/multicast/enabled", "false")
-        .unwrap();
-    let z = zenoh::open(zc).await.unwrap();
+    let z = zenoh_peer(&endpoint).await;
     tokio::time::sleep(Duration::from_millis(500)).await;
     let metrics = server.metrics().clone();
     let refused =

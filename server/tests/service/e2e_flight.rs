@@ -111,14 +111,7 @@ async fn zenoh_flight_equals_offline_estimate() {
     let server = Server::start(cfg).await.unwrap();
     let mut rx = server.registry().ctx().hub.poses.subscribe();
 
-    let mut zc = zenoh::Config::default();
-    zc.insert_json5("mode", "\"peer\"").unwrap();
-    zc.insert_json5("listen/endpoints", "[]").unwrap();
-    zc.insert_json5("connect/endpoints", &format!("[\"{endpoint}\"]"))
-        .unwrap();
-    zc.insert_json5("scouting/multicast/enabled", "false")
-        .unwrap();
-    let z = zenoh::open(zc).await.unwrap();
+    let z = common::zenoh_peer(&endpoint).await;
     tokio::time::sleep(Duration::from_millis(500)).await;
     let key = |leaf: Leaf| keys::vehicle_key("ze2e", leaf);
     let enc = |leaf: Leaf| uavnavd::zenoh_io::encoding(leaf.message_name());
