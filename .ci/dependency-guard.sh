@@ -8,7 +8,9 @@
 #   with its default features (the superset: zenoh and recording);
 # - the tests of a crate below the service (pure crates, datasets, logs, report) link the service
 #   or zenoh: they would wait for them to build and link them into every test binary (the real-data
-#   tests find their data through `uavnav-testdata`, not the service's test kit).
+#   tests find their data through `uavnav-testdata`, not the service's test kit);
+# - a crate that Cargo.toml builds at opt-level 0 as build-time-only code (proc macros, code
+#   generators) is reached at run time, where the tests would run it unoptimised.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 status=0
@@ -41,5 +43,13 @@ for crate in uavnav-core uavnav-sim uavnav-vision uavnav-estimator uavnav-runner
         status=1
     fi
 done
-[ "$status" -eq 0 ] && echo "dependency guard: the pure crates reach no tokio, tonic, prost or zenoh; uavnav-client reaches no crate of ours beyond uavnav-proto and uavnav-core, and no plotters; the tests below the service link no service or zenoh"
+runtime=$(cargo tree --workspace -e normal,dev,no-proc-macro --prefix none --locked) || exit 1
+runtime=$(printf '%s\n' "$runtime" | awk '{print $1}' | sort -u)
+build_only=$(grep -E '^[A-Za-z0-9_-]+ = \{ opt-level = 0, debug = false \}' Cargo.toml | awk '{print $1}' | sort -u)
+bad=$(comm -12 <(printf '%s\n' "$runtime") <(printf '%s\n' "$build_only"))
+if [ -n "$bad" ]; then
+    echo "dependency guard: Cargo.toml builds these at opt-level 0 as build-time code, but they run in the service or tests: $(echo $bad | tr '\n' ' ')" >&2
+    status=1
+fi
+[ "$status" -eq 0 ] && echo "dependency guard: the pure crates reach no tokio, tonic, prost or zenoh; uavnav-client reaches no crate of ours beyond uavnav-proto and uavnav-core, and no plotters; the tests below the service link no service or zenoh; no build-time-only crate runs unoptimised"
 exit "$status"
