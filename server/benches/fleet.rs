@@ -12,6 +12,11 @@
 //! `--tls`: the same load with security on: TLS (certificates made for the run), every client
 //! authenticated by a bearer token and every envelope authorized against a fleet grant — the cost
 //! of security on the hot path, against the plaintext rows.
+//!
+//! `--zenoh-watch-one`: Zenoh on, and a Zenoh peer subscribed to one vehicle's `pose` (`v0`):
+//! what one watched vehicle costs a fleet. The poses the service put on Zenoh
+//! (`uavnav_zenoh_poses_published_total`) and those the watcher got are printed on stderr. The
+//! `cores` column is the process's CPU time (service and load generator) over the run's wall time.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use std::sync::Arc;
@@ -33,6 +38,7 @@ struct Args {
     batch: usize,
     clients: usize,
     tls: bool,
+    zenoh_watch_one: bool,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -43,6 +49,7 @@ fn parse_args() -> Result<Args, String> {
         batch: 4,
         clients: 8,
         tls: false,
+        zenoh_watch_one: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -51,6 +58,7 @@ fn parse_args() -> Result<Args, String> {
             "--bench" => {}
             "--camera" => a.camera = true,
             "--tls" => a.tls = true,
+            "--zenoh-watch-one" => a.zenoh_watch_one = true,
             "--vehicles" => {
                 a.vehicles = val()?.split(',').map(|s| s.trim().parse().map_err(|e| format!("--vehicles: {e}"))).collect::<Result<_, _>>()?
             }
@@ -58,7 +66,7 @@ fn parse_args() -> Result<Args, String> {
             "--batch" => a.batch = val()?.parse().map_err(|e| format!("--batch: {e}"))?,
             "--clients" => a.clients = val()?.parse().map_err(|e| format!("--clients: {e}"))?,
             "--help" | "-h" => {
-                return Err("usage: fleet [--vehicles N,N,...] [--camera] [--tls] [--duration-s S] [--batch K] [--clients C]".into())
+                return Err("usage: fleet [--vehicles N,N,...] [--camera] [--tls] [--zenoh-watch-one] [--duration-s S] [--batch K] [--clients C]".into())
             }
             other => return Err(format!("unknown argument {other}")),
         }
@@ -67,6 +75,33 @@ fn parse_args() -> Result<Args, String> {
         return Err("--duration-s must be <= 19 (the smoke flight lasts 20 s)".into());
     }
     Ok(a)
+}
+
+/// CPU time of this process (user + system), seconds.
+fn cpu_s() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    // Fields after the command name (which may hold spaces): utime and stime are 14 and 15.
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let f: Vec<f64> = rest
+        .split_whitespace()
+        .map(|x| x.parse().unwrap_or(0.0))
+        .collect();
+    // Clock ticks of 1/100 s (`getconf CLK_TCK` on Linux).
+    (f.get(11).copied().unwrap_or(0.0) + f.get(12).copied().unwrap_or(0.0)) / 100.0
+}
+
+/// A Zenoh peer session that connects to `connect` only (no listener, no multicast scouting).
+async fn zenoh_peer(connect: &str) -> zenoh::Session {
+    let mut c = zenoh::Config::default();
+    for (k, v) in [
+        ("mode", "\"peer\"".to_string()),
+        ("listen/endpoints", "[]".to_string()),
+        ("connect/endpoints", format!("[\"{connect}\"]")),
+        ("scouting/multicast/enabled", "false".to_string()),
+    ] {
+        c.insert_json5(k, &v).expect("zenoh config");
+    }
+    zenoh::open(c).await.expect("zenoh session")
 }
 
 /// One wire payload at its sensor time.
@@ -158,6 +193,7 @@ struct Row {
     lat_max_ms: f64,
     rss_start_mib: f64,
     rss_end_mib: f64,
+    cores: f64,
 }
 
 impl Row {
@@ -238,6 +274,9 @@ async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleCo
     cfg.grpc.addr = "127.0.0.1:0".parse().expect("addr");
     cfg.http.addr = "127.0.0.1:0".parse().expect("addr");
     cfg.zenoh.enabled = false;
+    let zenoh_endpoint = args
+        .zenoh_watch_one
+        .then(|| uavnav_tests::service::listen_zenoh(&mut cfg));
     cfg.vehicles.max_vehicles = n + 16;
     let dir = tempfile::tempdir().expect("tempdir");
     let ca = if args.tls {
@@ -267,6 +306,20 @@ async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleCo
         None
     };
     let server = Server::start(cfg).await.expect("server starts");
+    let zenoh_watcher = match &zenoh_endpoint {
+        Some(endpoint) => {
+            let z = zenoh_peer(endpoint).await;
+            let sub = z
+                .declare_subscriber(uavnav_proto::keys::vehicle_key(
+                    "v0",
+                    uavnav_proto::keys::Leaf::Pose,
+                ))
+                .await
+                .expect("zenoh subscriber");
+            Some((z, sub))
+        }
+        None => None,
+    };
     let target = Target {
         addr: server.grpc_addr,
         ca,
@@ -309,6 +362,7 @@ async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleCo
         }
     });
     let rss_start = rss_mib();
+    let cpu_start_s = cpu_s();
     let t_first = items[0].t_ns;
     let horizon_ns = (args.duration_s * 1e9) as i64;
     let start = tokio::time::Instant::now() + Duration::from_millis(300);
@@ -395,6 +449,15 @@ async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleCo
         .map(|h| h.shared.stats.shed.load(Ordering::Relaxed))
         .sum();
     let rss_end = rss_mib();
+    let cores = (cpu_s() - cpu_start_s) / (seconds + 0.5);
+    if let Some((z, sub)) = zenoh_watcher {
+        eprintln!(
+            "{n} vehicles, v0 watched on Zenoh: {} poses put on Zenoh, {} received by the watcher",
+            server.metrics().zenoh_poses_published.get(),
+            sub.drain().count()
+        );
+        let _ = z.close().await;
+    }
     server.shutdown().await.expect("shutdown");
     watcher.abort();
     let h = hist.lock().map(|h| h.clone()).expect("hist");
@@ -414,6 +477,7 @@ async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleCo
         lat_max_ms: h.max() as f64 / 1e3,
         rss_start_mib: rss_start,
         rss_end_mib: rss_end,
+        cores,
     }
 }
 
@@ -456,13 +520,13 @@ fn main() {
         .build()
         .expect("runtime");
     println!(
-        "| vehicles | camera | TLS + auth | s | envelopes/s | IMU sent | poses | frames sent | refused | shed | send lag p99 ms | latency p50 / p99 / max ms | RSS start → end MiB | sustained |"
+        "| vehicles | camera | TLS + auth | s | envelopes/s | IMU sent | poses | frames sent | refused | shed | send lag p99 ms | latency p50 / p99 / max ms | RSS start → end MiB | cores | sustained |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for &n in &args.vehicles {
         let r = rt.block_on(run(n, &args, Arc::clone(&items), config));
         println!(
-            "| {} | {} | {} | {:.1} | {:.0} | {} | {} | {} | {} | {} | {:.1} | {:.1} / {:.1} / {:.1} | {:.0} → {:.0} | {} |",
+            "| {} | {} | {} | {:.1} | {:.0} | {} | {} | {} | {} | {} | {:.1} | {:.1} / {:.1} / {:.1} | {:.0} → {:.0} | {:.2} | {} |",
             r.vehicles,
             if args.camera { "10 Hz" } else { "no" },
             if args.tls { "yes" } else { "no" },
@@ -479,6 +543,7 @@ fn main() {
             r.lat_max_ms,
             r.rss_start_mib,
             r.rss_end_mib,
+            r.cores,
             if r.sustained() { "yes" } else { "no" }
         );
     }

@@ -264,6 +264,8 @@ pub struct Metrics {
     /// Health reports that repeat a quiet vehicle's previous one and that Zenoh did not publish
     /// for want of `zenoh.repeat_health_per_s`.
     pub zenoh_health_repeats_skipped: Counter,
+    /// Poses put on Zenoh: only those of vehicles some remote subscriber watches.
+    pub zenoh_poses_published: Counter,
     /// Output batches (poses) and reports (health) gRPC watch streams skipped because they were
     /// behind.
     pub watch_lagged: Counter,
@@ -314,6 +316,7 @@ impl Metrics {
         let zenoh_output_lagged = Counter::default();
         let zenoh_dropped = Counter::default();
         let zenoh_health_repeats_skipped = Counter::default();
+        let zenoh_poses_published = Counter::default();
         let watch_lagged = Counter::default();
         let zenoh_samples = Counter::default();
         let foxglove_dropped = Counter::default();
@@ -433,6 +436,11 @@ impl Metrics {
             zenoh_health_repeats_skipped.clone(),
         );
         registry.register(
+            "zenoh_poses_published",
+            "Poses put on Zenoh (only those of vehicles some remote subscriber watches)",
+            zenoh_poses_published.clone(),
+        );
+        registry.register(
             "watch_lagged",
             "Pose batches and health reports gRPC watch streams skipped because they were behind",
             watch_lagged.clone(),
@@ -485,6 +493,7 @@ impl Metrics {
             zenoh_output_lagged,
             zenoh_dropped,
             zenoh_health_repeats_skipped,
+            zenoh_poses_published,
             watch_lagged,
             zenoh_samples,
             foxglove_dropped,

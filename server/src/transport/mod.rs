@@ -8,6 +8,7 @@
 //! | [`grpc`] | the tonic `uavnav.v1.UavNav` service |
 //! | [`http`] | `/metrics`, `/livez`, `/readyz` |
 //! | [`zenoh`] | the embedded Zenoh session: inputs, outputs, queryables, liveliness |
+//! | [`zenoh_out`] | the Zenoh output task: poses and health put only while (and where) a remote subscriber wants them |
 //! | [`zenoh_stats`] | what Zenoh dropped on congested links, read from its runtime into `/metrics` |
 
 pub mod arrivals;
@@ -15,4 +16,5 @@ pub mod conn;
 pub mod grpc;
 pub mod http;
 pub mod zenoh;
+pub mod zenoh_out;
 pub mod zenoh_stats;

@@ -316,3 +316,101 @@ async fn zenoh_round_trip() {
     z.close().await.unwrap();
     server.shutdown().await.unwrap();
 }
+
+/// One subscriber on one vehicle's `pose` makes `*/pose` match; the other vehicles' poses must
+/// still cost nothing (issue 19: output cost in proportion to what is watched, not to the
+/// fleet). Then a fleet-wide subscriber gets every vehicle's poses, from publishers already
+/// declared.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn only_watched_vehicles_poses_are_put() {
+    let mut cfg = test_config();
+    let endpoint = listen_zenoh(&mut cfg);
+    let server = start(cfg).await;
+    let z = zenoh_peer(&endpoint).await;
+    let one = z
+        .declare_subscriber(keys::vehicle_key("seen", Leaf::Pose))
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let n = 20;
+    let feed = |id: &'static str, first: i64| {
+        let z = z.clone();
+        async move {
+            let key = |leaf: Leaf| keys::vehicle_key(id, leaf);
+            z.put(key(Leaf::Config), vehicle_config(false).encode_to_vec())
+                .encoding(enc("uavnav.v1.VehicleConfig"))
+                .await
+                .unwrap();
+            z.put(key(Leaf::Gnss), fix(first - 1_000).encode_to_vec())
+                .encoding(enc("uavnav.v1.GnssFix"))
+                .await
+                .unwrap();
+            for k in 0..n {
+                let batch = pb::ImuBatch {
+                    samples: vec![imu(first + k * 5_000_000)],
+                };
+                z.put(key(Leaf::Imu), batch.encode_to_vec())
+                    .encoding(enc("uavnav.v1.ImuBatch"))
+                    .await
+                    .unwrap();
+            }
+        }
+    };
+    let last_t = |first: i64| first + (n - 1) * 5_000_000;
+    feed("seen", 2_000).await;
+    feed("unseen", 2_000).await;
+    let reg = server.registry().clone();
+    let done = |id: &'static str, t: i64| {
+        let reg = reg.clone();
+        move || {
+            reg.get(id)
+                .and_then(|v| v.shared.pose())
+                .is_some_and(|p| p.t_ns == t)
+        }
+    };
+    assert!(eventually(Duration::from_secs(5), done("seen", last_t(2_000))).await);
+    assert!(eventually(Duration::from_secs(5), done("unseen", last_t(2_000))).await);
+    let mut got = 0;
+    while got < n {
+        let s = tokio::time::timeout(Duration::from_secs(5), one.recv_async())
+            .await
+            .expect("the watched vehicle's poses")
+            .unwrap();
+        let p = pb::PoseEstimate::decode(&*s.payload().to_bytes()).unwrap();
+        assert_eq!(p.vehicle_id, "seen");
+        got += 1;
+    }
+    let published = || server.metrics().zenoh_poses_published.get();
+    // Give a stray put of the unwatched vehicle the time to show.
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert_eq!(
+        published(),
+        n as u64,
+        "only the watched vehicle's poses were put"
+    );
+
+    let all = z
+        .declare_subscriber(keys::vehicle_key("*", Leaf::Pose))
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    feed("seen", 100_002_000).await;
+    feed("unseen", 100_002_000).await;
+    let mut by_vehicle = std::collections::BTreeMap::<String, i64>::new();
+    while by_vehicle.values().sum::<i64>() < 2 * n {
+        let s = tokio::time::timeout(Duration::from_secs(5), all.recv_async())
+            .await
+            .expect("every vehicle's poses on the fleet-wide key")
+            .unwrap();
+        let p = pb::PoseEstimate::decode(&*s.payload().to_bytes()).unwrap();
+        *by_vehicle.entry(p.vehicle_id).or_default() += 1;
+    }
+    assert_eq!(
+        by_vehicle.into_iter().collect::<Vec<_>>(),
+        [("seen".to_string(), n), ("unseen".to_string(), n)]
+    );
+    // The watched vehicle went to both subscribers' session once: puts counted per pose.
+    assert_eq!(published(), 3 * n as u64);
+    z.close().await.unwrap();
+    server.shutdown().await.unwrap();
+}
