@@ -13,7 +13,7 @@
 //! authenticated by a bearer token and every envelope authorized against a fleet grant — the cost
 //! of security on the hot path, against the plaintext rows.
 //!
-//! `--zenoh-watch-one`: Zenoh on, and a Zenoh peer subscribed to one vehicle's `pose` (`v0`):
+//! `--zenoh-watch-one`: Zenoh on, and a Zenoh peer subscribed to one vehicle's `pose` and `health` (`v0`):
 //! what one watched vehicle costs a fleet. The poses the service put on Zenoh
 //! (`uavnav_zenoh_poses_published_total`) and those the watcher got are printed on stderr. The
 //! `cores` column is the process's CPU time (service and load generator) over the run's wall time.
@@ -321,7 +321,17 @@ async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleCo
                 })
                 .await
                 .expect("zenoh subscriber");
-            let sub = (sub, got);
+            // And its health, as a ground station watching one vehicle would: health goes out
+            // on keys nobody declared, whose routing walks the session's declared keys.
+            let health = z
+                .declare_subscriber(uavnav_proto::keys::vehicle_key(
+                    "v0",
+                    uavnav_proto::keys::Leaf::Health,
+                ))
+                .callback(|_| {})
+                .await
+                .expect("zenoh subscriber");
+            let sub = (sub, got, health);
             Some((z, sub))
         }
         None => None,
@@ -521,8 +531,12 @@ fn main() {
     }
     let config = pb::VehicleConfig::from(&vc);
     let items = Arc::new(script(&events, args.batch, args.camera));
+    // As `uavnavd` runs: a worker that parks gives back its free memory.
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
+        .on_thread_park(|| {
+            uavnavd::allocator::collect_on_park();
+        })
         .build()
         .expect("runtime");
     println!(

@@ -159,7 +159,6 @@ impl ZenohIo {
             crate::transport::zenoh_out::OutputFeeds {
                 poses: hub.poses.subscribe(),
                 health: hub.health.subscribe(),
-                lifecycle: hub.lifecycle.subscribe(),
             },
             cfg.repeat_health_per_s,
             ingestor,
