@@ -15,7 +15,7 @@
 //! | `uavnav/v1/vehicle/{id}/pose/latest` | queryable | `uavnav.v1.PoseEstimate` |
 //! | `uavnav/v1/vehicles` | queryable | `uavnav.v1.ListVehiclesResponse` |
 //! | `uavnav/v1/service/{instance}` | liveliness token | — |
-//! | `uavnav/v1/alive/vehicle/{id}` | liveliness token | — |
+//! | `uavnav/v1/alive/vehicle/{id}` | liveliness token, once the vehicle is configured or has a pose | — |
 //!
 //! The vehicles' liveliness tokens live outside `uavnav/v1/vehicle/`, one level below a node of
 //! their own: Zenoh routes a put on a key that nobody declared by walking its tree of declared

@@ -522,6 +522,7 @@ impl Ingestor {
         h.shared
             .configured
             .store(true, std::sync::atomic::Ordering::Relaxed);
+        h.shared.announce(&self.registry().ctx().hub.lifecycle);
         if !created && !same {
             let (tx, rx) = tokio::sync::oneshot::channel();
             self.send(

@@ -30,7 +30,8 @@ pub struct Hub {
     pub poses: broadcast::Sender<Arc<PoseBatch>>,
     /// Every health report.
     pub health: broadcast::Sender<Arc<HealthReport>>,
-    /// Vehicle lifecycle (id, alive) for liveliness tokens.
+    /// Vehicle lifecycle for the liveliness tokens: (id, true) when a vehicle is announced (once
+    /// configured or once it has a pose), (id, false) when it is gone.
     pub lifecycle: broadcast::Sender<(Arc<str>, bool)>,
     /// Becomes `true` when the service starts shutting down.
     pub stopping: watch::Receiver<bool>,

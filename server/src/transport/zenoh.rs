@@ -456,6 +456,11 @@ fn spawn_liveliness(
                     let live: std::collections::HashSet<Arc<str>> = registry
                         .list("")
                         .into_iter()
+                        .filter(|h| {
+                            h.shared
+                                .announced
+                                .load(std::sync::atomic::Ordering::Relaxed)
+                        })
                         .map(|h| Arc::clone(&h.shared.id))
                         .collect();
                     tokens.retain(|id, _| live.contains(id));

@@ -666,6 +666,7 @@ impl Actor {
             poses: std::mem::replace(&mut self.outbox, Vec::with_capacity(n)),
         });
         self.shared.set_latest_pose(Arc::clone(&batch));
+        self.shared.announce(&self.ctx.hub.lifecycle);
         let _ = self.ctx.hub.poses.send(batch);
         self.ctx.metrics.poses.inc_by(n as u64);
     }

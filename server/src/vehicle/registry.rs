@@ -116,7 +116,9 @@ impl Registry {
         );
         map.insert(Arc::clone(&key), handle.clone());
         self.ctx.metrics.vehicles.set(map.len() as i64);
-        let _ = self.ctx.hub.lifecycle.send((key, true));
+        if config.is_some() {
+            shared.announce(&self.ctx.hub.lifecycle);
+        }
         Ok((handle, true))
     }
 

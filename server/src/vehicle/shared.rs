@@ -115,6 +115,9 @@ pub struct VehicleShared {
     pub camera: RwLock<Option<CameraSpec>>,
     /// Whether a configuration was given.
     pub configured: AtomicBool,
+    /// Whether the vehicle was announced alive (its Zenoh liveliness token): once configured or
+    /// once it has a pose, never for a mere id that sent data ([`VehicleShared::announce`]).
+    pub announced: AtomicBool,
     /// The configuration the engine runs with, when one was given: the same one again changes
     /// nothing (a client re-sends it when its stream reopens, which must not reset the filter).
     pub config: Mutex<Option<Arc<VehicleConfig>>>,
@@ -140,6 +143,7 @@ impl VehicleShared {
             gate: Mutex::new(TimeGate::default()),
             camera: RwLock::new(None),
             configured: AtomicBool::new(false),
+            announced: AtomicBool::new(false),
             config: Mutex::new(None),
             frames_queued: AtomicUsize::new(0),
             frame_bytes_queued: AtomicUsize::new(0),
@@ -193,6 +197,21 @@ impl VehicleShared {
     /// Records the latest pose batch.
     pub fn set_latest_pose(&self, batch: Arc<crate::output::hub::PoseBatch>) {
         *self.latest_pose.lock().unwrap_or_else(|p| p.into_inner()) = Some(batch);
+    }
+
+    /// Announces the vehicle alive on `lifecycle` (its Zenoh liveliness token), the first time
+    /// only. Called when it is configured and when it publishes poses.
+    ///
+    /// Why not when it is created: an id that merely sent data is not yet a vehicle the service
+    /// estimates, and a flood of new ids (issue 19, row 1: 20,000 ids of one IMU sample each)
+    /// made the service declare a token for every one of them, which Zenoh sends to every peer:
+    /// each ground station saw thousands of vehicles come alive and go, and the service held
+    /// about 4.5 kB per token.
+    pub fn announce(&self, lifecycle: &tokio::sync::broadcast::Sender<(Arc<str>, bool)>) {
+        if !self.announced.load(Ordering::Relaxed) && !self.announced.swap(true, Ordering::Relaxed)
+        {
+            let _ = lifecycle.send((Arc::clone(&self.id), true));
+        }
     }
 
     /// The latest health report, if any.
