@@ -164,26 +164,22 @@ fn warm_up_flight() -> Vec<pb::SensorEnvelope> {
     use uavnav_core::SensorEvent;
     let (mut config, events) = sim_flight("smoke", 3.0);
     config.camera = None;
-    let envelope = |sequence: u64, payload| pb::SensorEnvelope {
+    let mut envs = vec![pb::SensorEnvelope {
         vehicle_id: "warm-up".into(),
-        sequence,
-        payload: Some(payload),
-    };
-    let mut envs = vec![envelope(
-        0,
-        pb::sensor_envelope::Payload::Config(pb::VehicleConfig::from(&config)),
-    )];
-    for (k, e) in events.iter().enumerate() {
-        use pb::sensor_envelope::Payload as P;
-        let payload = match e {
-            SensorEvent::Imu(s) => P::Imu(pb::ImuBatch {
-                samples: vec![s.into()],
-            }),
-            SensorEvent::Gnss(_) => P::from(e),
-            _ => continue,
-        };
-        envs.push(envelope(1 + k as u64, payload));
-    }
+        sequence: 0,
+        payload: Some(pb::sensor_envelope::Payload::Config(
+            pb::VehicleConfig::from(&config),
+        )),
+    }];
+    // IMU and GNSS only.
+    let flown = events
+        .iter()
+        .filter(|e| matches!(e, SensorEvent::Imu(_) | SensorEvent::Gnss(_)));
+    envs.extend(
+        flown
+            .enumerate()
+            .map(|(k, e)| event_env("warm-up", 1 + k as u64, e)),
+    );
     envs
 }
 

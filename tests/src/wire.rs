@@ -24,6 +24,22 @@ pub fn imu_env(id: &str, seq: u64, samples: Vec<pb::ImuSample>) -> pb::SensorEnv
     }
 }
 
+/// The envelope of one sensor event (an IMU sample as a batch of one).
+pub fn event_env(id: &str, seq: u64, e: &uavnav_core::SensorEvent) -> pb::SensorEnvelope {
+    use pb::sensor_envelope::Payload as P;
+    let payload = match e {
+        uavnav_core::SensorEvent::Imu(s) => P::Imu(pb::ImuBatch {
+            samples: vec![s.into()],
+        }),
+        other => P::from(other),
+    };
+    pb::SensorEnvelope {
+        vehicle_id: id.into(),
+        sequence: seq,
+        payload: Some(payload),
+    }
+}
+
 /// A plausible GNSS fix.
 pub fn fix(t_ns: i64) -> pb::GnssFix {
     pb::GnssFix {

@@ -14,21 +14,6 @@ use uavnav_proto::keys::{self, Leaf};
 use uavnav_proto::v1 as pb;
 use uavnavd::Server;
 
-fn envelope(id: &str, seq: u64, e: &SensorEvent) -> pb::SensorEnvelope {
-    use pb::sensor_envelope::Payload as P;
-    let payload = match e {
-        SensorEvent::Imu(s) => P::Imu(pb::ImuBatch {
-            samples: vec![s.into()],
-        }),
-        other => P::from(other),
-    };
-    pb::SensorEnvelope {
-        vehicle_id: id.into(),
-        sequence: seq,
-        payload: Some(payload),
-    }
-}
-
 /// Configures `id` over gRPC and streams `events` to it, one envelope each; every one accepted.
 async fn configure_and_feed(
     server: &uavnavd::RunningServer,
@@ -46,7 +31,7 @@ async fn configure_and_feed(
     let envs: Vec<_> = events
         .iter()
         .enumerate()
-        .map(|(i, e)| envelope(id, i as u64, e))
+        .map(|(i, e)| common::event_env(id, i as u64, e))
         .collect();
     let acks = common::ingest(&mut c, envs).await.unwrap();
     assert_eq!(acks.len(), events.len());

@@ -12,7 +12,6 @@ use std::time::Duration;
 
 use crate::common::*;
 use uavnav_proto::keys;
-use uavnav_proto::v1 as pb;
 
 /// Vehicle liveliness tokens a Zenoh peer sees now.
 async fn alive_tokens(z: &zenoh::Session) -> usize {
@@ -125,21 +124,14 @@ async fn only_configured_or_estimated_vehicles_are_announced() {
     envs.push(config_env("configured", 1000, false));
     // Data only, IMU and GNSS of a simulated flight: the defaults estimate it.
     let (_, events) = sim_flight("smoke", 2.0);
-    for (k, e) in events.iter().enumerate() {
-        use pb::sensor_envelope::Payload as P;
-        let payload = match e {
-            SensorEvent::Imu(s) => P::Imu(pb::ImuBatch {
-                samples: vec![s.into()],
-            }),
-            SensorEvent::Gnss(_) => P::from(e),
-            _ => continue,
-        };
-        envs.push(pb::SensorEnvelope {
-            vehicle_id: "estimated".into(),
-            sequence: 2000 + k as u64,
-            payload: Some(payload),
-        });
-    }
+    let flown = events
+        .iter()
+        .filter(|e| matches!(e, SensorEvent::Imu(_) | SensorEvent::Gnss(_)));
+    envs.extend(
+        flown
+            .enumerate()
+            .map(|(k, e)| event_env("estimated", 2000 + k as u64, e)),
+    );
     ingest(&mut c, envs).await.unwrap();
     let reg = server.registry().clone();
     assert!(
