@@ -161,7 +161,6 @@ async fn warm_up(server: &uavnavd::RunningServer, envs: Vec<pb::SensorEnvelope>)
 
 /// The warm-up vehicle's configuration and flight, as envelopes.
 fn warm_up_flight() -> Vec<pb::SensorEnvelope> {
-    use uavnav_core::SensorEvent;
     let (mut config, events) = sim_flight("smoke", 3.0);
     config.camera = None;
     let mut envs = vec![pb::SensorEnvelope {
@@ -171,15 +170,7 @@ fn warm_up_flight() -> Vec<pb::SensorEnvelope> {
             pb::VehicleConfig::from(&config),
         )),
     }];
-    // IMU and GNSS only.
-    let flown = events
-        .iter()
-        .filter(|e| matches!(e, SensorEvent::Imu(_) | SensorEvent::Gnss(_)));
-    envs.extend(
-        flown
-            .enumerate()
-            .map(|(k, e)| event_env("warm-up", 1 + k as u64, e)),
-    );
+    envs.extend(imu_gnss_envs("warm-up", 1, &events));
     envs
 }
 

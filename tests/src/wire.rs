@@ -40,6 +40,22 @@ pub fn event_env(id: &str, seq: u64, e: &uavnav_core::SensorEvent) -> pb::Sensor
     }
 }
 
+/// The IMU samples and GNSS fixes of `events` as envelopes of vehicle `id`, numbered from
+/// `first_seq` (the other sensors left out).
+pub fn imu_gnss_envs(
+    id: &str,
+    first_seq: u64,
+    events: &[uavnav_core::SensorEvent],
+) -> Vec<pb::SensorEnvelope> {
+    use uavnav_core::SensorEvent as E;
+    events
+        .iter()
+        .filter(|e| matches!(e, E::Imu(_) | E::Gnss(_)))
+        .enumerate()
+        .map(|(k, e)| event_env(id, first_seq + k as u64, e))
+        .collect()
+}
+
 /// A plausible GNSS fix.
 pub fn fix(t_ns: i64) -> pb::GnssFix {
     pb::GnssFix {

@@ -111,7 +111,6 @@ async fn evicted_vehicles_leave_no_token_after_a_flood() {
 /// it no pose (the tests' echo engine makes one of every sample).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn only_configured_or_estimated_vehicles_are_announced() {
-    use uavnav_core::SensorEvent;
     let mut cfg = test_config();
     let endpoint = listen_zenoh(&mut cfg);
     let server = uavnavd::Server::start(cfg).await.unwrap();
@@ -124,14 +123,7 @@ async fn only_configured_or_estimated_vehicles_are_announced() {
     envs.push(config_env("configured", 1000, false));
     // Data only, IMU and GNSS of a simulated flight: the defaults estimate it.
     let (_, events) = sim_flight("smoke", 2.0);
-    let flown = events
-        .iter()
-        .filter(|e| matches!(e, SensorEvent::Imu(_) | SensorEvent::Gnss(_)));
-    envs.extend(
-        flown
-            .enumerate()
-            .map(|(k, e)| event_env("estimated", 2000 + k as u64, e)),
-    );
+    envs.extend(imu_gnss_envs("estimated", 2000, &events));
     ingest(&mut c, envs).await.unwrap();
     let reg = server.registry().clone();
     assert!(

@@ -30,21 +30,6 @@ fn strip(mut p: pb::PoseEstimate) -> pb::PoseEstimate {
     p
 }
 
-fn envelope(id: &str, seq: u64, e: &SensorEvent) -> pb::SensorEnvelope {
-    use pb::sensor_envelope::Payload as P;
-    let payload = match e {
-        SensorEvent::Imu(s) => P::Imu(pb::ImuBatch {
-            samples: vec![s.into()],
-        }),
-        other => P::from(other),
-    };
-    pb::SensorEnvelope {
-        vehicle_id: id.into(),
-        sequence: seq,
-        payload: Some(payload),
-    }
-}
-
 fn record_config(dir: &Path) -> Config {
     let mut cfg = test_config();
     cfg.record.directory = Some(dir.to_owned());
@@ -70,7 +55,7 @@ async fn stream_flight(
     let envs: Vec<_> = events
         .iter()
         .enumerate()
-        .map(|(i, e)| envelope(id, i as u64, e))
+        .map(|(i, e)| common::event_env(id, i as u64, e))
         .collect();
     let n = envs.len();
     let mut acks = c
