@@ -8,7 +8,7 @@
 //! | [`grpc`] | the tonic `uavnav.v1.UavNav` service |
 //! | [`http`] | `/metrics`, `/livez`, `/readyz` |
 //! | [`zenoh`] | the embedded Zenoh session: inputs, outputs, queryables, liveliness |
-//! | [`zenoh_out`] | the Zenoh output task: poses and health put only while (and where) a remote subscriber wants them |
+//! | [`zenoh_out`] | the Zenoh output task: poses and health put only while a remote subscriber matches their leaf |
 //! | [`zenoh_stats`] | what Zenoh dropped on congested links, read from its runtime into `/metrics` |
 
 pub mod arrivals;
