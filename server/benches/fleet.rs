@@ -19,6 +19,9 @@
 //! `cores` column is the process's CPU time (service and load generator) over the run's wall time.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
+#[path = "../tests/common/mod.rs"]
+mod common;
+
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
@@ -88,20 +91,6 @@ fn cpu_s() -> f64 {
         .collect();
     // Clock ticks of 1/100 s (`getconf CLK_TCK` on Linux).
     (f.get(11).copied().unwrap_or(0.0) + f.get(12).copied().unwrap_or(0.0)) / 100.0
-}
-
-/// A Zenoh peer session that connects to `connect` only (no listener, no multicast scouting).
-async fn zenoh_peer(connect: &str) -> zenoh::Session {
-    let mut c = zenoh::Config::default();
-    for (k, v) in [
-        ("mode", "\"peer\"".to_string()),
-        ("listen/endpoints", "[]".to_string()),
-        ("connect/endpoints", format!("[\"{connect}\"]")),
-        ("scouting/multicast/enabled", "false".to_string()),
-    ] {
-        c.insert_json5(k, &v).expect("zenoh config");
-    }
-    zenoh::open(c).await.expect("zenoh session")
 }
 
 /// One wire payload at its sensor time.
@@ -308,7 +297,7 @@ async fn run(n: usize, args: &Args, items: Arc<Vec<Item>>, config: pb::VehicleCo
     let server = Server::start(cfg).await.expect("server starts");
     let zenoh_watcher = match &zenoh_endpoint {
         Some(endpoint) => {
-            let z = zenoh_peer(endpoint).await;
+            let z = common::zenoh_peer(endpoint).await;
             let got = Arc::new(AtomicU64::new(0));
             let g = Arc::clone(&got);
             let sub = z
