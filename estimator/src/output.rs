@@ -18,8 +18,19 @@ pub fn euler_rate_matrix(roll: f64, pitch: f64) -> nalgebra::Matrix3<f64> {
 /// Roll/pitch/yaw σ from the global (NED) attitude-error covariance:
 /// `δ(φ,θ,ψ) = J(φ,θ) Cᵀ δθⁿ` (a nav-frame error is the body-frame error `Cᵀ δθⁿ`).
 pub fn euler_sigma(q: &UnitQuaternion<f64>, cov_th: &nalgebra::Matrix3<f64>) -> Vector3<f64> {
-    let (roll, pitch, _) = q.euler_angles();
-    let m = euler_rate_matrix(roll, pitch) * q.to_rotation_matrix().matrix().transpose();
+    let (roll, pitch, yaw) = q.euler_angles();
+    euler_sigma_at(&Vector3::new(roll, pitch, yaw), cov_th)
+}
+
+/// [`euler_sigma`] for a caller that has the ZYX angles already (every output has): `J Cᵀ` in
+/// closed form, which depends on pitch and yaw only,
+/// `[[cψ/cθ, sψ/cθ, 0], [−sψ, cψ, 0], [tθ cψ, tθ sψ, 1]]` (the inverse of the nav-frame rate
+/// `ωⁿ = ψ̇ e_z + Rz(ψ) θ̇ e_y + Rz(ψ) Ry(θ) φ̇ e_x`).
+pub fn euler_sigma_at(euler_rad: &Vector3<f64>, cov_th: &nalgebra::Matrix3<f64>) -> Vector3<f64> {
+    let (sp, cp) = euler_rad.y.sin_cos();
+    let (sy, cy) = euler_rad.z.sin_cos();
+    let tp = sp / cp;
+    let m = nalgebra::Matrix3::new(cy / cp, sy / cp, 0.0, -sy, cy, 0.0, tp * cy, tp * sy, 1.0);
     let c = m * cov_th * m.transpose();
     Vector3::new(
         c[(0, 0)].max(0.0).sqrt(),
@@ -76,6 +87,28 @@ impl LlaLinearizer {
             lat_rad: self.ref_lla.lat_rad + dl.x,
             lon_rad: self.ref_lla.lon_rad + dl.y,
             alt_m: self.ref_lla.alt_m + dl.z,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_closed_form_is_j_times_c_transposed() {
+        for (r, p, y) in [
+            (0.3, -0.7, 2.5),
+            (-1.2, 0.4, -0.3),
+            (2.9, 1.3, 1.0),
+            (0.0, 0.0, 0.0),
+        ] {
+            let q = UnitQuaternion::from_euler_angles(r, p, y);
+            let m = euler_rate_matrix(r, p) * q.to_rotation_matrix().matrix().transpose();
+            let cov = nalgebra::Matrix3::new(4.0, 0.5, -0.2, 0.5, 2.0, 0.3, -0.2, 0.3, 9.0) * 1e-6;
+            let want = (m * cov * m.transpose()).diagonal().map(f64::sqrt);
+            let got = euler_sigma_at(&Vector3::new(r, p, y), &cov);
+            assert!((got - want).norm() < 1e-12 * want.norm(), "{got} vs {want}");
         }
     }
 }

@@ -19,7 +19,7 @@
 //! the composite σ stays wide, so the main filter is never told a heading it does not have. The
 //! composite heading is the weighted circular mean, its variance the weighted spread plus the
 //! weighted model variances. Pure and allocation-free: ~5 quaternion and 3×3 updates per IMU
-//! sample.
+//! sample, or per `predict_period_s` (10 ms) for faster IMUs.
 
 use std::f64::consts::{PI, TAU};
 
@@ -65,6 +65,11 @@ pub struct YawEstimatorParams {
     pub persistent_accel_sigma_mps2: f64,
     /// Time constant of the RMS horizontal acceleration behind that bound, s.
     pub accel_rms_window_s: f64,
+    /// Shortest interval over which the models are propagated, s: faster IMU samples are summed
+    /// (delta angle, delta velocity) until it is reached. The bank's dynamics are the heading and
+    /// the horizontal velocity, slow against 10 ms; propagating it at a 1 kHz IMU's rate would
+    /// cost ten times as much for nothing (PX4 runs its bank at the filter's 100 Hz the same way).
+    pub predict_period_s: f64,
 }
 
 impl Default for YawEstimatorParams {
@@ -78,6 +83,7 @@ impl Default for YawEstimatorParams {
             converged_hold_ns: 2_000_000_000,
             persistent_accel_sigma_mps2: 0.1,
             accel_rms_window_s: 10.0,
+            predict_period_s: 0.01,
         }
     }
 }
@@ -117,6 +123,9 @@ pub struct YawEstimator {
     accel_ms: Option<f64>,
     /// The model with the largest weight (weights change only at GNSS velocities).
     lead: usize,
+    /// IMU intervals summed but not yet propagated (`predict_period_s`): gyro · dt (rad),
+    /// specific force · dt (m/s), dt (s).
+    pending: (Vector3<f64>, Vector3<f64>, f64),
 }
 
 impl Default for YawEstimator {
@@ -159,6 +168,7 @@ impl YawEstimator {
             f_h_int: (Vector2::zeros(), 0.0),
             accel_ms: None,
             lead: 0,
+            pending: (Vector3::zeros(), Vector3::zeros(), 0.0),
         }
     }
 
@@ -167,7 +177,9 @@ impl YawEstimator {
         self.started
     }
 
-    /// Propagates every model over one IMU interval with the mean rates and specific force.
+    /// Takes one IMU interval with its mean rates and specific force: the models are propagated
+    /// once at least `predict_period_s` has been summed (an interval that long on its own is
+    /// propagated as it is, so a 50 Hz IMU's samples are used one by one).
     pub fn predict(&mut self, gyro: &Vector3<f64>, accel: &Vector3<f64>, dt_s: f64) {
         if dt_s.is_nan() || dt_s <= 0.0 || dt_s >= 1.0 {
             return;
@@ -178,6 +190,29 @@ impl YawEstimator {
             self.f_count += 1;
             return;
         }
+        if self.pending.2 == 0.0 && dt_s >= self.params.predict_period_s {
+            self.propagate(gyro, accel, dt_s);
+            return;
+        }
+        self.pending.0 += gyro * dt_s;
+        self.pending.1 += accel * dt_s;
+        self.pending.2 += dt_s;
+        if self.pending.2 >= self.params.predict_period_s {
+            self.flush();
+        }
+    }
+
+    /// Propagates what [`YawEstimator::predict`] has summed, if anything.
+    fn flush(&mut self) {
+        let (d_angle, d_vel, dt_s) = self.pending;
+        if dt_s > 0.0 {
+            self.pending = (Vector3::zeros(), Vector3::zeros(), 0.0);
+            self.propagate(&(d_angle / dt_s), &(d_vel / dt_s), dt_s);
+        }
+    }
+
+    /// Propagates every model over `dt_s` with the mean rates and specific force.
+    fn propagate(&mut self, gyro: &Vector3<f64>, accel: &Vector3<f64>, dt_s: f64) {
         let g = 9.80665;
         let f_exp_nav = Vector3::new(self.accel_kin.x, self.accel_kin.y, -g);
         let f_norm = accel.norm();
@@ -233,6 +268,8 @@ impl YawEstimator {
         if !v.iter().all(|x| x.is_finite()) {
             return;
         }
+        // The models are weighed at the bank's latest time, not up to `predict_period_s` behind.
+        self.flush();
         let sigma = sigma_mps.max(self.params.min_vel_sigma_mps);
         let mut after_gap = false;
         if let Some((t0, v0)) = self.last_vel {
@@ -469,6 +506,40 @@ mod tests {
             }
         }
         e
+    }
+
+    #[test]
+    fn a_fast_imu_is_summed_to_the_predict_period() {
+        // Ten 1 ms samples of constant rates propagate the models as one 10 ms sample does.
+        let start = |e: &mut YawEstimator| {
+            e.predict(&Vector3::zeros(), &Vector3::new(0.0, 0.0, -9.80665), 0.01);
+            e.fuse_velocity(0, Vector2::zeros(), 0.2);
+        };
+        let (mut fast, mut slow) = (YawEstimator::default(), YawEstimator::default());
+        start(&mut fast);
+        start(&mut slow);
+        let gyro = Vector3::new(0.01, -0.02, 0.3);
+        let f_b = Vector3::new(1.0, 0.5, -9.80665);
+        for _ in 0..100 {
+            for _ in 0..10 {
+                fast.predict(&gyro, &f_b, 0.001);
+            }
+            slow.predict(&gyro, &f_b, 0.01);
+        }
+        fast.fuse_velocity(1_000_000_000, Vector2::new(1.0, 0.5), 0.2);
+        slow.fuse_velocity(1_000_000_000, Vector2::new(1.0, 0.5), 0.2);
+        for (a, b) in fast.models.iter().zip(&slow.models) {
+            assert!((a.yaw - b.yaw).abs() < 1e-9, "{} vs {}", a.yaw, b.yaw);
+            assert!((a.v - b.v).norm() < 1e-9);
+            assert!((a.p - b.p).norm() < 1e-12);
+            assert!((a.weight - b.weight).abs() < 1e-9);
+        }
+        // A part-period left over is propagated before a velocity is weighed.
+        fast.predict(&gyro, &f_b, 0.004);
+        let before = fast.models[0].q;
+        fast.fuse_velocity(1_100_000_000, Vector2::new(1.0, 0.5), 0.2);
+        assert_ne!(fast.models[0].q, before);
+        assert_eq!(fast.pending.2, 0.0);
     }
 
     #[test]

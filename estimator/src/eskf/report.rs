@@ -6,7 +6,7 @@ use uavnav_core::MotionPrior;
 
 use super::Eskf;
 use crate::health::{Health, Mode, PoseHealth};
-use crate::output::{AidingFlags, PoseOutput, euler_sigma};
+use crate::output::{AidingFlags, PoseOutput, euler_sigma_at};
 use crate::state::{IP, ITH, IV, N};
 
 impl Eskf {
@@ -101,16 +101,17 @@ impl Eskf {
         let mut cov_th: Matrix3<f64> = self.p.fixed_view::<3, 3>(ITH, ITH).into_owned();
         cov_th[(2, 2)] = cov_th[(2, 2)].max(self.yaw_sigma_floor_rad.powi(2));
         let (r, p_, y) = o.q.euler_angles();
+        let euler_rad = Vector3::new(r, p_, y);
         Some(PoseOutput {
             t_ns: o.t_ns,
             lla,
             pos_ned_m: o.p,
             vel_ned_mps: o.v,
             nav_from_body: o.q,
-            euler_rad: Vector3::new(r, p_, y),
+            euler_rad,
             sigma_pos_ned_m: d(IP),
             sigma_vel_mps: d(IV),
-            sigma_att_rad: euler_sigma(&o.q, &cov_th),
+            sigma_att_rad: euler_sigma_at(&euler_rad, &cov_th),
             gyro_bias_radps: x.bg,
             accel_bias_mps2: x.ba,
             health: self.pose_health(),

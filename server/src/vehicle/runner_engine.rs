@@ -59,19 +59,26 @@ pub struct RunnerEngine {
     scratch: Step,
 }
 
-impl RunnerEngine {
-    /// Appends `step`'s poses to `out` and hands back its vision work.
-    fn emit(&mut self, step: &mut Step, out: &mut Vec<Pose>) -> Option<VisionWork<VisionDone>> {
-        if let Some(p) = step.poses.last() {
-            self.last_t_ns = p.t_ns;
-        }
-        out.extend(step.poses.iter().map(compact_pose));
-        step.job.take().map(vision_work)
+/// Appends `step`'s poses to `out`, notes the last one's time and hands back the vision work.
+/// A free function over the fields, so that [`RunnerEngine::push_into`] can lend its scratch step
+/// in place (taking it out and back moved the whole `Step`, vision job slot included, twice per
+/// IMU sample).
+fn emit(
+    last_t_ns: &mut i64,
+    step: &mut Step,
+    out: &mut Vec<Pose>,
+) -> Option<VisionWork<VisionDone>> {
+    if let Some(p) = step.poses.last() {
+        *last_t_ns = p.t_ns;
     }
+    out.extend(step.poses.iter().map(compact_pose));
+    step.job.take().map(vision_work)
+}
 
+impl RunnerEngine {
     fn step(&mut self, mut step: Step) -> EngineStep<VisionDone> {
         let mut poses = Vec::with_capacity(step.poses.len());
-        let work = self.emit(&mut step, &mut poses);
+        let work = emit(&mut self.last_t_ns, &mut step, &mut poses);
         EngineStep {
             poses,
             work,
@@ -98,11 +105,9 @@ impl Engine for RunnerEngine {
         event: SensorEvent,
         poses: &mut Vec<Pose>,
     ) -> Result<Option<VisionWork<VisionDone>>, EngineError> {
-        let mut scratch = std::mem::take(&mut self.scratch);
-        scratch.poses.clear();
-        let r = self.runner.push_into(event, &mut scratch);
-        let work = self.emit(&mut scratch, poses);
-        self.scratch = scratch;
+        self.scratch.poses.clear();
+        let r = self.runner.push_into(event, &mut self.scratch);
+        let work = emit(&mut self.last_t_ns, &mut self.scratch, poses);
         r.map_err(|e| EngineError(e.to_string()))?;
         Ok(work)
     }
