@@ -29,6 +29,11 @@ pub enum HeadingSource {
 /// contradiction, rad: below it the two agree as well as compasses do.
 pub const MAG_CONTRADICTION_MIN_RAD: f64 = 0.79;
 
+/// Time constant of the smoothed disagreement between the compass-held heading and the yaw
+/// bank, s: long enough to average the bank's fix-to-fix noise, short against a compass error
+/// that builds up over tens of seconds.
+pub const MAG_CONFLICT_TAU_S: f64 = 5.0;
+
 /// UNIX time of 2000-01-01, ns: stamps before it are on another clock (time since boot), and the
 /// date for the magnetic model is unknown.
 const UNIX_2000_NS: i64 = 946_684_800_000_000_000;
@@ -87,6 +92,8 @@ impl Eskf {
         // autopilot's heading through a 45 s hover; yaw RMSE 11.4° against 10.8° now).
         self.yaw_sigma_floor_rad = if self.heading_seen_by_gnss_velocity_only() {
             self.yaw_est.honest_sigma_rad().unwrap_or(0.0)
+        } else if mag_active {
+            self.compass_conflict_rad(m.t_ns, gsf)
         } else {
             0.0
         };
@@ -189,6 +196,40 @@ impl Eskf {
         self.mag.stop_contradicted();
         self.reset_yaw_to(bank);
         self.mag_contradicted_since_ns = None;
+    }
+
+    /// The least yaw σ a compass-held heading can claim while the converged yaw bank sees the
+    /// heading elsewhere: their disagreement, smoothed over [`MAG_CONFLICT_TAU_S`] (held while
+    /// the bank has not converged).
+    ///
+    /// Why: the compass's error is correlated over minutes (a calibration residual, motor
+    /// currents), so heading fusion every half second shrinks the filter's yaw σ to ~2° while
+    /// the compass can be 5–25° off; two independent sources of the heading that disagree by `d`
+    /// mean that one of them is off by about that much, and the output cannot tell which. On
+    /// public ArduPilot copters (the survey in the README) the compass-held heading drifted 10–36°
+    /// from the autopilot's own compass heading for a minute with σ 1.6–2°, while the bank sat
+    /// 8–20° from it. Only the reported σ is floored, as for a heading without a compass: the
+    /// filter's own yaw σ shapes its gains, and the compass stays the heading source until the
+    /// contradiction is gross (`check_mag_against_bank`).
+    fn compass_conflict_rad(&mut self, t_ns: i64, gsf: Option<(f64, f64)>) -> f64 {
+        let prev = self.mag_bank_conflict;
+        let (Some((d, _)), Some(bank_sigma)) = (
+            gsf.and_then(|b| self.disagreement_with(b)),
+            self.yaw_est.honest_sigma_rad(),
+        ) else {
+            return prev.map_or(0.0, |(_, c)| c);
+        };
+        let excess = (d * d - bank_sigma * bank_sigma).max(0.0).sqrt();
+        let c = match prev {
+            Some((t0, c0)) if t_ns > t0 => {
+                let a = 1.0 - (-((t_ns - t0) as f64 * 1e-9) / MAG_CONFLICT_TAU_S).exp();
+                c0 + (excess - c0) * a
+            }
+            Some((_, c0)) => c0,
+            None => excess,
+        };
+        self.mag_bank_conflict = Some((t_ns, c));
+        c
     }
 
     /// After a heading alignment late in a flight: what the filter learnt of the horizontal
