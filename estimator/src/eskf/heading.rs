@@ -34,6 +34,36 @@ pub const MAG_CONTRADICTION_MIN_RAD: f64 = 0.79;
 /// that builds up over tens of seconds.
 pub const MAG_CONFLICT_TAU_S: f64 = 5.0;
 
+/// The compass/bank disagreement behind [`Eskf`]'s `compass_conflict_rad`: the part of the
+/// disagreement `d` that the bank's own σ `σ_b` does not explain, `√max(0, d² − σ_b²)`, smoothed
+/// over [`MAG_CONFLICT_TAU_S`].
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub(super) struct CompassConflict {
+    /// Time of the last update, ns, and the smoothed value, rad.
+    last: Option<(i64, f64)>,
+}
+
+impl CompassConflict {
+    /// Takes `(d, σ_b)` at `t_ns`, or `None` while the bank has not converged (the value is then
+    /// held), and returns the smoothed unexplained disagreement, rad.
+    pub(super) fn update(&mut self, t_ns: i64, seen: Option<(f64, f64)>) -> f64 {
+        let Some((d, bank_sigma)) = seen else {
+            return self.last.map_or(0.0, |(_, c)| c);
+        };
+        let excess = (d * d - bank_sigma * bank_sigma).max(0.0).sqrt();
+        let c = match self.last {
+            Some((t0, c0)) if t_ns > t0 => {
+                let a = 1.0 - (-((t_ns - t0) as f64 * 1e-9) / MAG_CONFLICT_TAU_S).exp();
+                c0 + (excess - c0) * a
+            }
+            Some((_, c0)) => c0,
+            None => excess,
+        };
+        self.last = Some((t_ns, c));
+        c
+    }
+}
+
 /// UNIX time of 2000-01-01, ns: stamps before it are on another clock (time since boot), and the
 /// date for the magnetic model is unknown.
 const UNIX_2000_NS: i64 = 946_684_800_000_000_000;
@@ -212,24 +242,11 @@ impl Eskf {
     /// filter's own yaw σ shapes its gains, and the compass stays the heading source until the
     /// contradiction is gross (`check_mag_against_bank`).
     fn compass_conflict_rad(&mut self, t_ns: i64, gsf: Option<(f64, f64)>) -> f64 {
-        let prev = self.mag_bank_conflict;
-        let (Some((d, _)), Some(bank_sigma)) = (
-            gsf.and_then(|b| self.disagreement_with(b)),
-            self.yaw_est.honest_sigma_rad(),
-        ) else {
-            return prev.map_or(0.0, |(_, c)| c);
-        };
-        let excess = (d * d - bank_sigma * bank_sigma).max(0.0).sqrt();
-        let c = match prev {
-            Some((t0, c0)) if t_ns > t0 => {
-                let a = 1.0 - (-((t_ns - t0) as f64 * 1e-9) / MAG_CONFLICT_TAU_S).exp();
-                c0 + (excess - c0) * a
-            }
-            Some((_, c0)) => c0,
-            None => excess,
-        };
-        self.mag_bank_conflict = Some((t_ns, c));
-        c
+        let seen = gsf
+            .and_then(|b| self.disagreement_with(b))
+            .zip(self.yaw_est.honest_sigma_rad())
+            .map(|((d, _), bank_sigma)| (d, bank_sigma));
+        self.mag_bank_conflict.update(t_ns, seen)
     }
 
     /// After a heading alignment late in a flight: what the filter learnt of the horizontal
@@ -309,5 +326,37 @@ impl Eskf {
             t_ns,
         );
         self.inject(dx);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const S: i64 = 1_000_000_000;
+
+    #[test]
+    fn the_conflict_is_what_the_bank_sigma_does_not_explain() {
+        let deg = f64::to_radians;
+        let mut c = CompassConflict::default();
+        // Inside the bank's own σ: no conflict.
+        assert_eq!(c.update(0, Some((deg(8.0), deg(10.0)))), 0.0);
+        // 20° apart with the bank at 12°: √(20² − 12²) = 16°, reached over a few τ.
+        let mut v = 0.0;
+        for k in 1..=60 {
+            v = c.update(k * S / 2, Some((deg(-20.0), deg(12.0))));
+            if k == 10 {
+                // After 5 s = τ: 1 − 1/e of the way.
+                let want = deg(16.0) * (1.0 - (-1.0f64).exp());
+                assert!((v - want).abs() < 1e-9, "{v} vs {want}");
+            }
+        }
+        assert!((v - deg(16.0)).abs() < deg(0.1), "{}", v.to_degrees());
+        // Held while the bank is unconverged, then decays once the two agree again.
+        assert_eq!(c.update(31 * S, None), v);
+        let later = c.update(41 * S, Some((0.0, deg(5.0))));
+        assert!(later < v * 0.2 && later > 0.0, "{}", later.to_degrees());
+        // A repeated or older stamp changes nothing.
+        assert_eq!(c.update(41 * S, Some((deg(90.0), 0.0))), later);
     }
 }

@@ -100,9 +100,9 @@ pub struct Eskf {
     imu_clipped: u64,
     /// Since when the magnetometer-held heading has contradicted the converged yaw bank.
     mag_contradicted_since_ns: Option<i64>,
-    /// How far the compass-held heading and the converged yaw bank have recently disagreed,
-    /// smoothed: (time of the last update, ns; rad). See `Eskf::compass_conflict_rad`.
-    mag_bank_conflict: Option<(i64, f64)>,
+    /// How far the compass-held heading and the converged yaw bank have recently disagreed
+    /// beyond the bank's σ (`Eskf::compass_conflict_rad`).
+    mag_bank_conflict: heading::CompassConflict,
     vision: VisionSource,
     out: OutputPredictor,
     late_dropped: u64,
@@ -221,7 +221,7 @@ impl Eskf {
                 || config.airframe == uavnav_core::Airframe::FixedWing,
             yaw_resets: 0,
             mag_contradicted_since_ns: None,
-            mag_bank_conflict: None,
+            mag_bank_conflict: heading::CompassConflict::default(),
             imu_clipped: 0,
             vision: VisionSource::default(),
             out: OutputPredictor::new(),
