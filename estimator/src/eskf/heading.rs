@@ -87,7 +87,12 @@ impl Eskf {
                     x,
                     &mut self.p,
                     yaw,
-                    sigma.max(self.params.init_yaw_sigma_rad * 0.5),
+                    // At least the bank's own threshold of a known heading: the bank's σ can be
+                    // overconfident when it converges (11.8° off at a few degrees on the
+                    // simulated multirotor), and a handed-over σ too small leaves GNSS too little
+                    // gain to correct it (copter_218 without its compass: yaw RMSE 10.8° with a
+                    // 5° floor, 9.9° with this one).
+                    sigma.max(self.params.yaw_estimator.converged_sigma_rad),
                 );
                 self.yaw_aligned = true;
                 self.heading = HeadingSource::YawEstimator;
