@@ -95,7 +95,7 @@ fn yaw_bank_finds_the_heading_from_every_start_without_a_magnetometer() {
         let f = flight(heading, false);
         let (poses, src) = run(&f);
         // The vehicle hovers and yaws in place for the first 10 s (nothing tells the heading),
-        // then accelerates: from 20 s on the heading must be known within 10°.
+        // then accelerates: from 20 s on the heading must be known within 2° (the issue asks 10°).
         let (within, max_after) = yaw_scores(&f, &poses, 20.0);
         eprintln!(
             "heading {heading:6.1}: source {src:?}, within 3 sigma {:.1} %, max |yaw error| after 20 s {:.2} deg",
@@ -103,12 +103,14 @@ fn yaw_bank_finds_the_heading_from_every_start_without_a_magnetometer() {
             max_after.to_degrees()
         );
         assert_eq!(src, HeadingSource::YawEstimator, "heading {heading}");
-        // 95 % is the target and 10 of 12 starts meet it (9 at 100 %, −23° at 95.7 %). Two do not
-        // (open issue): from 37° the bank hands over a heading 11.8° off and the filter's own yaw
-        // then settles 5° off with σ 0.4° (81.9 %); from −53°, 2.4° off (91.1 %).
-        assert!(within >= 0.8, "heading {heading}: {within}");
+        // 95 % is the target: every start meets it (99.6–100 %), since the velocity is reset to
+        // the GNSS velocity when the bank hands over the heading (`Eskf::reset_velocity_to_gnss`).
+        // Before, from 37° the bank handed over a heading 11.8° off, the velocity propagated
+        // under the unknown heading was 0.8 m/s off, and the filter's yaw settled 5° off with σ
+        // 0.4° (81.9 %); from −53°, 2.4° off (91.1 %).
+        assert!(within >= 0.95, "heading {heading}: {within}");
         assert!(
-            max_after < 10f64.to_radians(),
+            max_after < 2f64.to_radians(),
             "heading {heading}: {max_after}"
         );
     }
