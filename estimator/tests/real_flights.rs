@@ -112,7 +112,7 @@ fn copter_218_without_magnetometer() {
     };
     assert_eq!(s.bad_sigma_rows, 0, "{s}");
     // Met: roll/pitch (1.35/1.01°), horizontal (0.55 m), never confidently wrong (100 % within
-    // 3σ; 55 % before the yaw σ was floored at the yaw bank's spread), yaw within 10° (9.89° RMSE
+    // 3σ; 55 % before the yaw σ was floored at the yaw bank's spread), yaw within 10° (9.78° RMSE
     // against the autopilot's compass heading, which has its own ~4° error; 10.8° while the yaw
     // was handed over from the bank with its own σ rather than at least its convergence
     // threshold, 12.7° before GNSS stopped correcting the yaw while the accelerations cannot
