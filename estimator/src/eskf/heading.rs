@@ -272,11 +272,13 @@ impl Eskf {
             (None, Some(vh)) => (Vector3::new(vh.x, vh.y, x.v.z), 2),
             (None, None) => return,
         };
-        // The antenna's velocity: the lever-arm term C (ω × r) is left in, covered by the σ
-        // (0.1 m/s: 0.2 m at 0.5 rad/s).
+        // The antenna's velocity: the lever-arm term C (ω × r) is left in and covered by the σ,
+        // as a body rate of 0.1 rad/s times the lever arm; at least 0.1 m/s whatever the
+        // receiver states (a missing or zero σ must not make the reset exact).
         let var = m
             .sigma_vel_mps
             .hypot(0.1 * self.lever_b.norm().min(10.0))
+            .max(0.1)
             .powi(2);
         x.v = v;
         for i in IV..IV + axes {
