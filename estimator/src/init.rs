@@ -224,9 +224,7 @@ pub fn set_yaw(x: &mut Nominal, cov: &mut Cov, yaw: f64, yaw_sigma_rad: f64) {
 /// Keeps the heading unknown: no correlation with any other state and the variance of a heading
 /// uniform round the circle (the yaw is not estimated until aligned).
 pub fn hold_yaw_unknown(cov: &mut Cov) {
-    cov.row_mut(ITH + 2).fill(0.0);
-    cov.column_mut(ITH + 2).fill(0.0);
-    cov[(ITH + 2, ITH + 2)] = UNALIGNED_YAW_SIGMA_RAD.powi(2);
+    crate::state::set_uncorrelated(cov, ITH + 2, UNALIGNED_YAW_SIGMA_RAD.powi(2));
 }
 
 #[cfg(test)]

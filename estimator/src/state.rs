@@ -118,6 +118,14 @@ pub fn augment_clone(p: &mut Cov) {
     *p = (*p + p.transpose()) * 0.5;
 }
 
+/// Sets the error state `i` to variance `var` with no correlation with any other state (a reset of
+/// that state, or one whose past correlations are not to be trusted).
+pub fn set_uncorrelated(p: &mut Cov, i: usize, var: f64) {
+    p.row_mut(i).fill(0.0);
+    p.column_mut(i).fill(0.0);
+    p[(i, i)] = var;
+}
+
 /// Removes the clone block (zero covariance, no correlation).
 pub fn clear_clone(p: &mut Cov) {
     for k in ICTH..N {

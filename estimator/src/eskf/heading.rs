@@ -9,7 +9,7 @@ use super::Eskf;
 use crate::aid_sources::gnss_pos::GnssMeas;
 use crate::aid_sources::mag_heading::{MagState, heading_from_field};
 use crate::init::{set_yaw, yaw_from_course};
-use crate::state::{ITH, IV, N};
+use crate::state::{ITH, IV, set_uncorrelated};
 
 /// Where the filter's heading came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -282,11 +282,7 @@ impl Eskf {
             .powi(2);
         x.v = v;
         for i in IV..IV + axes {
-            for j in (0..N).filter(|&j| j != i) {
-                self.p[(i, j)] = 0.0;
-                self.p[(j, i)] = 0.0;
-            }
-            self.p[(i, i)] = var;
+            set_uncorrelated(&mut self.p, i, var);
         }
         self.corrected = true;
     }
@@ -297,10 +293,7 @@ impl Eskf {
     fn forget_horizontal_accel_bias(&mut self) {
         let s2 = self.params.init_accel_bias_sigma_mps2.powi(2);
         for k in 0..2 {
-            let i = crate::state::IBA + k;
-            self.p.row_mut(i).fill(0.0);
-            self.p.column_mut(i).fill(0.0);
-            self.p[(i, i)] = s2;
+            set_uncorrelated(&mut self.p, crate::state::IBA + k, s2);
         }
         if let Some(x) = self.x.as_mut() {
             x.ba.x = 0.0;
