@@ -15,6 +15,30 @@ pub fn euler_rate_matrix(roll: f64, pitch: f64) -> nalgebra::Matrix3<f64> {
     nalgebra::Matrix3::new(1.0, sr * tp, cr * tp, 0.0, cr, -sr, 0.0, sr / cp, cr / cp)
 }
 
+/// The canonical ZYX angles of the same attitude: pitch in [−90°, 90°], roll and yaw in
+/// (−180°, 180°]. A filter whose state is Euler angles (the `paper` profile's attitude EKF)
+/// carries pitch through ±90° when the vehicle flips, and `(φ, θ, ψ)` and `(φ + π, π − θ, ψ + π)`
+/// are the same rotation; the output always gives the first form, as `euler_angles` of the
+/// quaternion does, so that angles from both profiles compare. The σ of each angle is unchanged
+/// (the map is a sign flip of θ and shifts of φ and ψ).
+pub fn canonical_euler(e: &Vector3<f64>) -> Vector3<f64> {
+    use std::f64::consts::{FRAC_PI_2, PI, TAU};
+    // Angles already in range are returned bit for bit (outputs compare exactly in replays).
+    let wrap = |a: f64| {
+        if a > -PI && a <= PI {
+            return a;
+        }
+        let w = (a + PI).rem_euclid(TAU) - PI;
+        if w == -PI { PI } else { w }
+    };
+    let pitch = wrap(e.y);
+    if pitch.abs() <= FRAC_PI_2 {
+        Vector3::new(wrap(e.x), pitch, wrap(e.z))
+    } else {
+        Vector3::new(wrap(e.x + PI), wrap(PI - pitch), wrap(e.z + PI))
+    }
+}
+
 /// Roll/pitch/yaw σ from the global (NED) attitude-error covariance:
 /// `δ(φ,θ,ψ) = J(φ,θ) Cᵀ δθⁿ` (a nav-frame error is the body-frame error `Cᵀ δθⁿ`).
 pub fn euler_sigma(q: &UnitQuaternion<f64>, cov_th: &nalgebra::Matrix3<f64>) -> Vector3<f64> {
@@ -110,5 +134,33 @@ mod tests {
             let got = euler_sigma_at(&Vector3::new(r, p, y), &cov);
             assert!((got - want).norm() < 1e-12 * want.norm(), "{got} vs {want}");
         }
+    }
+
+    #[test]
+    fn canonical_angles_are_the_same_rotation_with_pitch_within_90_degrees() {
+        use std::f64::consts::FRAC_PI_2;
+        // A flipped vehicle as an Euler-state filter carries it (pitch −165°), angles past ±π,
+        // and ordinary ones, which stay as they are.
+        for e in [
+            Vector3::new(0.14, -2.88, -1.3),
+            Vector3::new(-3.0, 1.9, 3.1),
+            Vector3::new(6.5, 0.2, -7.0),
+            Vector3::new(0.3, -0.7, 2.5),
+        ] {
+            let c = canonical_euler(&e);
+            assert!(
+                c.y.abs() <= FRAC_PI_2 && c.x.abs() <= std::f64::consts::PI,
+                "{c}"
+            );
+            let (qa, qb) = (
+                UnitQuaternion::from_euler_angles(e.x, e.y, e.z),
+                UnitQuaternion::from_euler_angles(c.x, c.y, c.z),
+            );
+            assert!(qa.angle_to(&qb) < 1e-12, "{e} -> {c}");
+            let (r, p, y) = qb.euler_angles();
+            assert!((Vector3::new(r, p, y) - c).norm() < 1e-9, "{c}");
+        }
+        let plain = Vector3::new(0.3, -0.7, 2.5);
+        assert_eq!(canonical_euler(&plain), plain);
     }
 }

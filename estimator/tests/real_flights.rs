@@ -257,8 +257,10 @@ fn trace() {
         );
         let gsf = e.yaw_estimator().yaw();
         eprint!(
-            "bgz {:.3} ",
-            e.nominal().map_or(f64::NAN, |x| x.bg.z.to_degrees())
+            "bgz {:.3} ba {:?} ",
+            e.nominal().map_or(f64::NAN, |x| x.bg.z.to_degrees()),
+            e.nominal()
+                .map(|x| [x.ba.x, x.ba.y, x.ba.z].map(|b| (b * 1000.0).round() / 1000.0)),
         );
         eprint!(
             "B {:.0}mG typ {:.0}mG ",

@@ -102,7 +102,7 @@ impl PaperFilter {
             pos_ned_m: pv.x,
             vel_ned_mps: pv.v,
             nav_from_body: att.quaternion(),
-            euler_rad: att.euler,
+            euler_rad: crate::output::canonical_euler(&att.euler),
             sigma_pos_ned_m: sd(&pos_cov),
             sigma_vel_mps: sd(&pv.p.fixed_view::<3, 3>(3, 3).into_owned()),
             sigma_att_rad: sd(&att.p_euler()),
