@@ -22,6 +22,7 @@
 //! |---|---|
 //! | [`accuracy`] | attitude RMSE, outage drift, 3σ consistency: [`accuracy::AccuracyReport`] |
 //! | [`outages`] | [`gnss_outages`]: outage windows derived from the GNSS fix times |
+//! | [`reference`] | [`reference::screen`]: a reference's samples far from the GNSS fixes left out before scoring |
 //! | [`tables`] | `accuracy.json` and `accuracy.md` |
 //! | [`figures`] | plot-ready series and the panels of each figure |
 //! | [`plot`] | the stacked-panel PNG renderer (embedded font, no system fonts) |
@@ -33,6 +34,7 @@ pub mod error;
 pub mod figures;
 pub mod outages;
 pub mod plot;
+pub mod reference;
 pub mod series;
 pub mod tables;
 

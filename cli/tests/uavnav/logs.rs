@@ -199,6 +199,39 @@ fn estimate_a_real_log_with_a_report_against_the_autopilot_reference() {
     assert!(json.contains("\"scored_against\": \"reference (autopilot estimate, EKF1)\""));
 }
 
+/// copter_103's EKF1 fails in the crash that ends the log (the shared conversion stops its
+/// reference at 163 s for that reason): the report leaves those samples out and says so, instead
+/// of scoring the estimate against them.
+#[test]
+fn a_reference_that_leaves_the_gnss_fixes_is_screened_out_and_said() {
+    let Some(root) = uavnav_tests::shared_data("real_flights") else {
+        return;
+    };
+    let raw = root.join("raw/erle_copter_103.BIN");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (poses, report) = (dir.path().join("poses.csv"), dir.path().join("report"));
+    let out = run(&[
+        "estimate",
+        raw.to_str().expect("path"),
+        "--out",
+        poses.to_str().expect("path"),
+        "--report",
+        report.to_str().expect("path"),
+    ]);
+    assert_eq!(out.status.code(), Some(0));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("Scored against: reference (autopilot estimate, EKF1); "))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    assert!(
+        line.contains("samples left out as implausibly far from the GNSS fixes"),
+        "{line}"
+    );
+    let json = std::fs::read_to_string(report.join("accuracy.json")).expect("json");
+    assert!(json.contains("left out as implausibly far"), "{json}");
+}
+
 #[test]
 fn a_cut_log_imports_with_a_note_and_a_corrupt_one_is_refused_with_its_byte_offset() {
     let Some(root) = uavnav_tests::shared_data("real_flights") else {

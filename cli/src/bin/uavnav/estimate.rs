@@ -5,8 +5,9 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use uavnav_core::{FilterProfile, SensorEvent, TruthSample};
+use uavnav_core::{FilterProfile, Lla, LocalFrame, SensorEvent, TruthSample};
 use uavnav_dataset::poses::{csv_header, csv_row, tum_line};
+use uavnav_report::reference::{FixNed, ScreenParams, screen};
 use uavnav_runner::{PoseOutput, RunnerParams, VehicleRunner};
 
 use crate::common::{CliError, CliResult};
@@ -175,10 +176,19 @@ pub fn run_dataset(
         notes: ds.notes().to_vec(),
         ..RunOutput::default()
     };
+    let mut fixes = Vec::new();
+    let fix_frame = ds.origin().map(LocalFrame::new);
     for ev in ds.events().map_err(CliError::input)? {
         let ev = ev.map_err(CliError::input)?;
         if let SensorEvent::Gnss(g) = &ev {
             out.gnss_t_ns.push(g.t_ns);
+            if let Some(f) = &fix_frame {
+                fixes.push(FixNed {
+                    t_ns: g.t_ns,
+                    pos_ned_m: f.lla_to_ned(&Lla::from_deg(g.lat_deg, g.lon_deg, g.alt_m)),
+                    sigma_h_m: g.sigma_h_m,
+                });
+            }
         }
         // A source left out is not fed at all, so that the run's label does not list it as read.
         match &ev {
@@ -213,7 +223,32 @@ pub fn run_dataset(
             }
         }
     }
+    // A reference is screened against the fixes before anything is scored against it (an
+    // autopilot's EKF that failed outright must not be reported as our drift).
+    let comparison = comparison.map(|c| match c.short {
+        "reference" => screened(c, &mut fixes),
+        _ => c,
+    });
     Ok((out, comparison))
+}
+
+/// The reference without its samples far from the GNSS fixes, named with what was left out.
+fn screened(c: Comparison, fixes: &mut [FixNed]) -> Comparison {
+    fixes.sort_by_key(|f| f.t_ns);
+    let params = ScreenParams::default();
+    let s = screen(&c.samples, fixes, &params);
+    let name = match s.note(&params) {
+        Some(note) => {
+            eprintln!("uavnav: reference: {note}");
+            format!("{}; {note}", c.name)
+        }
+        None => c.name,
+    };
+    Comparison {
+        name,
+        samples: s.kept,
+        ..c
+    }
 }
 
 /// Runs the command.
