@@ -625,7 +625,19 @@ impl Eskf {
             self.params.gnss_pos_correlated_fraction,
             self.params.gnss_pos_white_min_m,
         );
-        let (gate, reset) = (self.params.gate_sigma, self.params.gnss_reset_timeout_ns);
+        // Without a heading the horizontal inertial prediction cannot tell where the vehicle
+        // went (its accelerations are rotated by a yaw that is not known), and the yaw held
+        // uncorrelated at every update keeps the velocity σ from growing with that error: a GNSS
+        // fix the prediction disagrees with is then no evidence against the fix. So until the
+        // heading is aligned, the second fix in a row that the gate refuses is taken with an
+        // inflate-and-fuse reset, as a long rejection is once aligned (counted in the sources'
+        // `resets`).
+        let reset = if self.yaw_aligned {
+            self.params.gnss_reset_timeout_ns
+        } else {
+            0
+        };
+        let gate = self.params.gate_sigma;
         let consider = self.heading_unobservable_states();
         let dx = self
             .gnss_pos
