@@ -111,9 +111,10 @@ fn copter_218_without_magnetometer() {
         return;
     };
     assert_eq!(s.bad_sigma_rows, 0, "{s}");
-    // Met: roll/pitch (1.35/1.01°), horizontal (0.55 m), never confidently wrong (100 % within
-    // 3σ; 55 % before the yaw σ was floored at the yaw bank's spread), yaw within 10° (9.78° RMSE
-    // against the autopilot's compass heading, which has its own ~4° error; 10.8° while the yaw
+    // Met: roll/pitch (1.34/1.02°), horizontal (0.61 m), never confidently wrong (100 % within
+    // 3σ; 55 % before the yaw σ was floored at the yaw bank's spread), yaw within 10° (9.36° RMSE
+    // against the autopilot's compass heading, which has its own ~4° error; 9.78° while GNSS
+    // fixes could be gated out for seconds before the heading was aligned; 10.8° while the yaw
     // was handed over from the bank with its own σ rather than at least its convergence
     // threshold, 12.7° before GNSS stopped correcting the yaw while the accelerations cannot
     // tell it, `Eskf::heading_unobservable_states`). What is left is mostly an offset through
