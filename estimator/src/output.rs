@@ -22,14 +22,15 @@ pub fn euler_rate_matrix(roll: f64, pitch: f64) -> nalgebra::Matrix3<f64> {
 /// quaternion does, so that angles from both profiles compare. The σ of each angle is unchanged
 /// (the map is a sign flip of θ and shifts of φ and ψ).
 pub fn canonical_euler(e: &Vector3<f64>) -> Vector3<f64> {
-    use std::f64::consts::{FRAC_PI_2, PI, TAU};
-    // Angles already in range are returned bit for bit (outputs compare exactly in replays).
+    use std::f64::consts::{FRAC_PI_2, PI};
+    // Angles already in range are returned bit for bit (outputs compare exactly in replays;
+    // `wrap_pi` moves the last bit of some).
     let wrap = |a: f64| {
         if a > -PI && a <= PI {
-            return a;
+            a
+        } else {
+            uavnav_core::rotation::wrap_pi(a)
         }
-        let w = (a + PI).rem_euclid(TAU) - PI;
-        if w == -PI { PI } else { w }
     };
     let pitch = wrap(e.y);
     if pitch.abs() <= FRAC_PI_2 {

@@ -156,21 +156,6 @@ pub fn run_dataset(
     // The local frame is fixed at the first GNSS fix, exactly as in the service, so that the same
     // input gives the same poses offline and online; the report maps poses into the truth frame.
     let mut runner = VehicleRunner::new(config, params, None);
-    // Truth first; a reference (another estimator's output) only where there is no truth, and
-    // under its own name.
-    let comparison = match (ds.truth(), ds.reference()) {
-        (Some(t), _) => Some(Comparison {
-            short: "truth",
-            name: "truth".into(),
-            samples: t.to_vec(),
-        }),
-        (None, Some(r)) => Some(Comparison {
-            short: "reference",
-            name: r.label(),
-            samples: r.samples.clone(),
-        }),
-        (None, None) => None,
-    };
     let mut out = RunOutput {
         origin: ds.origin(),
         notes: ds.notes().to_vec(),
@@ -223,31 +208,37 @@ pub fn run_dataset(
             }
         }
     }
-    // A reference is screened against the fixes before anything is scored against it (an
-    // autopilot's EKF that failed outright must not be reported as our drift).
-    let comparison = comparison.map(|c| match c.short {
-        "reference" => screened(c, &mut fixes),
-        _ => c,
-    });
+    // Truth first; a reference (another estimator's output) only where there is no truth, under
+    // its own name, and screened against the fixes first (an autopilot's EKF that failed
+    // outright must not be reported as our drift).
+    let comparison = match (ds.truth(), ds.reference()) {
+        (Some(t), _) => Some(Comparison {
+            short: "truth",
+            name: "truth".into(),
+            samples: t.to_vec(),
+        }),
+        (None, Some(r)) => Some(screened(r.label(), &r.samples, &mut fixes)),
+        (None, None) => None,
+    };
     Ok((out, comparison))
 }
 
 /// The reference without its samples far from the GNSS fixes, named with what was left out.
-fn screened(c: Comparison, fixes: &mut [FixNed]) -> Comparison {
+fn screened(label: String, samples: &[TruthSample], fixes: &mut [FixNed]) -> Comparison {
     fixes.sort_by_key(|f| f.t_ns);
     let params = ScreenParams::default();
-    let s = screen(&c.samples, fixes, &params);
+    let s = screen(samples, fixes, &params);
     let name = match s.note(&params) {
         Some(note) => {
             eprintln!("uavnav: reference: {note}");
-            format!("{}; {note}", c.name)
+            format!("{label}; {note}")
         }
-        None => c.name,
+        None => label,
     };
     Comparison {
+        short: "reference",
         name,
         samples: s.kept,
-        ..c
     }
 }
 
