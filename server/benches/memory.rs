@@ -174,6 +174,21 @@ fn warm_up_flight() -> Vec<pb::SensorEnvelope> {
     envs
 }
 
+/// The stalled readers' vehicles' flight: 20 s of the smoke flight, IMU and GNSS.
+fn stalled_flight() -> Vec<pb::SensorEnvelope> {
+    let (mut config, events) = sim_flight("smoke", 20.0);
+    config.camera = None;
+    let mut envs = vec![pb::SensorEnvelope {
+        vehicle_id: String::new(),
+        sequence: 0,
+        payload: Some(pb::sensor_envelope::Payload::Config(
+            pb::VehicleConfig::from(&config),
+        )),
+    }];
+    envs.extend(imu_gnss_envs("", 1, &events));
+    envs
+}
+
 /// Row 1/2: `n` new vehicle ids, one IMU sample each.
 async fn flood(server: &uavnavd::RunningServer, n: usize) {
     let mut c = client(server).await;
@@ -285,6 +300,105 @@ async fn idle_connections(server: &uavnavd::RunningServer) -> usize {
     held.len()
 }
 
+/// The gRPC side of row 7: peers that stop reading. `conns` raw HTTP/2 connections, each with
+/// `grpc.max_streams_per_connection` `WatchPoses` streams on every vehicle and windows of
+/// 2³¹ − 1 bytes (so flow control never holds the service back), stop reading their sockets
+/// once the service has answered; `vehicles` vehicles then fly `flight` as fast as the service
+/// takes them, so that every stream has poses to send and nobody reads them. Returns the
+/// streams held.
+async fn stalled_readers(
+    server: &uavnavd::RunningServer,
+    conns: usize,
+    streams: u32,
+    flight: &[pb::SensorEnvelope],
+    vehicles: usize,
+) -> usize {
+    use prost::Message as _;
+    let request = pb::WatchRequest {
+        all: true,
+        ..Default::default()
+    }
+    .encode_to_vec();
+    let mut body = vec![0u8];
+    body.extend_from_slice(&(request.len() as u32).to_be_bytes());
+    body.extend_from_slice(&request);
+    let body = bytes::Bytes::from(body);
+    let mut held = Vec::new();
+    let mut opened = 0;
+    for _ in 0..conns {
+        let Ok(tcp) = tokio::net::TcpStream::connect(server.grpc_addr).await else {
+            continue;
+        };
+        let Ok((mut h2c, conn)) = h2::client::Builder::new()
+            .initial_window_size(i32::MAX as u32)
+            .initial_connection_window_size(i32::MAX as u32)
+            .handshake::<_, bytes::Bytes>(tcp)
+            .await
+        else {
+            continue;
+        };
+        // The connection is polled until the service has answered every stream, then held
+        // without polling: nothing reads its socket any more.
+        let (freeze, frozen) = tokio::sync::oneshot::channel::<()>();
+        let driver = tokio::spawn(async move {
+            let mut conn = conn;
+            tokio::select! {
+                _ = &mut conn => None,
+                _ = frozen => Some(conn),
+            }
+        });
+        let mut responses = Vec::new();
+        for _ in 0..streams {
+            let req = tonic::codegen::http::Request::builder()
+                .method("POST")
+                .uri(format!(
+                    "http://{}/uavnav.v1.UavNav/WatchPoses",
+                    server.grpc_addr
+                ))
+                .header("content-type", "application/grpc")
+                .header("te", "trailers")
+                .body(())
+                .unwrap();
+            let Ok(ready) = h2c.clone().ready().await else {
+                break;
+            };
+            h2c = ready;
+            let Ok((resp, mut send)) = h2c.send_request(req, false) else {
+                break;
+            };
+            let _ = send.send_data(body.clone(), true);
+            responses.push(resp);
+        }
+        let mut bodies = Vec::new();
+        for r in responses {
+            if let Ok(Ok(resp)) = tokio::time::timeout(Duration::from_secs(5), r).await {
+                bodies.push(resp.into_body());
+            }
+        }
+        opened += bodies.len();
+        let _ = freeze.send(());
+        let conn = driver.await.ok().flatten();
+        held.push((h2c, conn, bodies));
+    }
+    let c = client(server).await;
+    let sends = (0..vehicles).map(|v| {
+        let mut c = c.clone();
+        let envs: Vec<_> = flight
+            .iter()
+            .cloned()
+            .map(|mut e| {
+                e.vehicle_id = format!("stalled-{v}");
+                e
+            })
+            .collect();
+        async move { ingest(&mut c, envs).await }
+    });
+    let _ = futures::future::join_all(sends).await;
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    drop(held);
+    opened
+}
+
 fn main() {
     // The allocator options `uavnavd` runs with (re-executes once, as the binary does).
     uavnavd::allocator::apply_service_options();
@@ -313,7 +427,7 @@ async fn attacks_async() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(20_000usize);
     let flag = |name: &str| args.iter().any(|a| a == name);
-    // `--only N` runs attack N (1-5) alone; `--no-zenoh` runs without Zenoh: both tell where
+    // `--only N` runs attack N (1-6) alone; `--no-zenoh` runs without Zenoh: both tell where
     // what stays after the attacks comes from.
     let only: Option<usize> = args
         .iter()
@@ -328,10 +442,13 @@ async fn attacks_async() {
     cfg.vehicles.idle_evict_s = 2.0;
     let budget = MemoryBudget::of(&cfg);
     println!("the formula for this configuration:\n{budget}");
-    let (max_message, total_pixels) = (
+    let (max_message, total_pixels, streams) = (
         cfg.grpc.max_message_bytes,
         cfg.vision.max_total_camera_pixels,
+        cfg.grpc.max_streams_per_connection,
     );
+    let input_queue_bytes = cfg.vehicles.input_queue_bytes as u64;
+    let mut attack_within = true;
     // `--cold`: the baseline is the service that has served nothing yet.
     let warm = (!flag("--cold")).then(warm_up_flight);
     let server = uavnavd::Server::start(cfg).await.unwrap();
@@ -422,6 +539,53 @@ async fn attacks_async() {
         report(&format!("{n} idle TCP connections"), peak, rss_bytes());
     }
 
+    if run(6) {
+        // Four connections at the stream limit: 128 streams, against the formula's
+        // `max_streams_per_connection × grpc_stream` per connection.
+        let flight = stalled_flight();
+        let live_before = live_bytes();
+        sampler.take();
+        // `--stalled-streams N`: N streams per connection instead (0: the vehicles alone).
+        let per_conn = args
+            .iter()
+            .position(|a| a == "--stalled-streams")
+            .and_then(|i| args.get(i + 1))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(streams);
+        // `--stalled-vehicles N`: N vehicles fly instead of 4 (0: the streams alone).
+        let vehicles = args
+            .iter()
+            .position(|a| a == "--stalled-vehicles")
+            .and_then(|i| args.get(i + 1))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(4);
+        let n = stalled_readers(&server, 4, per_conn, &flight, vehicles).await;
+        let peak = sampler.take();
+        let grown = peak.saturating_sub(baseline);
+        // What the formula allows this attack: its connections at the stream limit, its
+        // vehicles with full input queues, and the output rings.
+        let allowed = 4
+            * (u64::from(uavnavd::budget::GRPC_CONNECTION_WINDOW)
+                + u64::from(streams) * uavnavd::budget::GRPC_STREAM_BYTES)
+            + vehicles as u64 * (uavnavd::budget::VEHICLE_BYTES + input_queue_bytes)
+            + uavnavd::budget::output_ring_bytes();
+        println!(
+            "  {n} stalled streams, {vehicles} vehicles: {:.1} MiB above the baseline, against \
+             {:.1} MiB that the formula's terms allow them (4 connections, {vehicles} vehicles, \
+             the output rings); live in the allocator {:+.1} MiB",
+            mib(grown),
+            mib(allowed),
+            (live_bytes() as f64 - live_before as f64) / f64::from(1u32 << 20),
+        );
+        attack_within &= grown <= allowed;
+        quiet(&server).await;
+        report(
+            &format!("{n} watch streams that stop reading"),
+            peak,
+            rss_bytes(),
+        );
+    }
+
     quiet(&server).await;
     // `--settle-s S`: the idle service is watched S s more before the final figure, printed
     // every 5 s (does what the allocator kept come back with time? It did not: 29.8 → 29.9 MiB
@@ -459,7 +623,7 @@ async fn attacks_async() {
     );
     drop(sampler);
     server.shutdown().await.unwrap();
-    let ok = worst <= limit && back;
+    let ok = worst <= limit && back && attack_within;
     if !ok {
         eprintln!("memory: a target was missed");
         std::process::exit(1);

@@ -15,6 +15,7 @@
 //!     + grpc.arrival_bytes                                            (gRPC messages arriving)
 //!     + grpc.max_connections × (connection_window
 //!                               + max_streams_per_connection × grpc_stream)   (gRPC connections)
+//!     + pose_ring × (batch + max_batch_poses × pose) + health_ring × health   (output rings)
 //!     + http.max_connections × http_connection
 //!     + zenoh_links × zenoh_link                                       (Zenoh, when on)
 //! ```
@@ -51,10 +52,34 @@ pub const HTTP_CONNECTION_BYTES: u64 = 256 << 10;
 /// peer may send before the service reads it.
 pub const GRPC_CONNECTION_WINDOW: u32 = 1 << 20;
 
-/// One open gRPC stream besides its arriving messages: tonic's 8 KiB codec buffers each way,
-/// HTTP/2 stream state, and up to hyper's 400 KB per-stream send buffer for a peer that stops
-/// reading a response stream (acknowledgements, watched poses).
-pub const GRPC_STREAM_BYTES: u64 = 448 << 10;
+/// One open gRPC stream besides its arriving messages: HTTP/2 stream state and tonic's codec
+/// buffers (measured 42 KiB per stream with 128 idle watch streams; 64 KiB), hyper's send buffer
+/// for a peer that stops reading (set by the service:
+/// [`STREAM_SEND_BUFFER`](crate::transport::grpc_serve::STREAM_SEND_BUFFER)), the encoded chunk
+/// tonic hands hyper beyond it (it yields at 32 KiB), and the response queue
+/// ([`RESPONSE_QUEUE_BYTES`](crate::transport::response_queue::RESPONSE_QUEUE_BYTES)).
+/// `cargo bench -p uavnavd --bench memory -- --only 6` measures it with 128 watch streams that
+/// stop reading while poses flow.
+pub const GRPC_STREAM_BYTES: u64 = (64 << 10)
+    + crate::transport::grpc_serve::STREAM_SEND_BUFFER as u64
+    + (32 << 10)
+    + crate::transport::response_queue::RESPONSE_QUEUE_BYTES as u64;
+
+/// One health report as the ring holds it: the message, its id and heap (no repeated fields
+/// but short ones), rounded up.
+pub const HEALTH_REPORT_BYTES: u64 = 2 << 10;
+
+/// The output hub's rings at their fullest: every slot keeps its batch or report until every
+/// watcher has taken it, so a watcher that stops reading keeps them all. A pose slot holds at
+/// most [`MAX_BATCH_POSES`](crate::output::hub::MAX_BATCH_POSES) poses (the actor splits larger
+/// batches).
+pub fn output_ring_bytes() -> u64 {
+    use crate::output::hub::{HEALTH_CAPACITY, MAX_BATCH_POSES, POSE_CAPACITY, Pose, PoseBatch};
+    // The Arc's two counts and the allocator's rounding of the two allocations.
+    let pose_slot =
+        std::mem::size_of::<PoseBatch>() + MAX_BATCH_POSES * std::mem::size_of::<Pose>() + 2 * 64;
+    (POSE_CAPACITY * pose_slot) as u64 + HEALTH_CAPACITY as u64 * HEALTH_REPORT_BYTES
+}
 
 /// Zenoh transports the session accepts (its `transport/unicast/max_sessions` default).
 pub const ZENOH_LINKS: u64 = 1000;
@@ -137,6 +162,11 @@ impl MemoryBudget {
                         + u64::from(g.max_streams_per_connection) * GRPC_STREAM_BYTES),
             },
             Term {
+                what: "output rings",
+                bound_by: "constant (output::hub: POSE_CAPACITY, MAX_BATCH_POSES, HEALTH_CAPACITY)",
+                bytes: output_ring_bytes(),
+            },
+            Term {
                 what: "HTTP connections",
                 bound_by: "http.max_connections",
                 bytes: u(config.http.max_connections) * HTTP_CONNECTION_BYTES,
@@ -184,6 +214,21 @@ impl std::fmt::Display for MemoryBudget {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_health_report_fits_its_ring_slot() {
+        let mut h = uavnav_proto::v1::VehicleHealth {
+            vehicle_id: "x".repeat(crate::ingest::validate::MAX_ID_LEN),
+            ..Default::default()
+        };
+        h.input_rates = Some(Default::default());
+        h.latency = Some(Default::default());
+        h.innovation_ratios = Some(Default::default());
+        h.counters = Some(Default::default());
+        h.vision = Some(Default::default());
+        let held = std::mem::size_of_val(&h) + prost::Message::encoded_len(&h) + 64;
+        assert!(held as u64 <= HEALTH_REPORT_BYTES, "{held} bytes");
+    }
 
     #[test]
     fn every_bound_of_the_configuration_moves_its_term() {

@@ -26,6 +26,7 @@ use crate::service::Service;
 use crate::transport::arrivals::{ArrivalBudget, ArrivalLayer};
 use crate::transport::conn::{self, ConnLimits, ListenerKind, TlsSide};
 use crate::transport::grpc::{UavNavService, remap_transport_status};
+use crate::transport::grpc_serve::{self, Http2Settings};
 use crate::transport::http::{HttpState, router};
 use crate::transport::zenoh::ZenohIo;
 use crate::vehicle::actor::{Ctx, Msg};
@@ -287,19 +288,8 @@ async fn serve_grpc(
             Duration::from_secs_f64(config.grpc.keepalive_timeout_s),
         )
     });
-    let mut router = tonic::transport::Server::builder()
-        .max_concurrent_streams(Some(config.grpc.max_streams_per_connection))
-        // Stated, not left to hyper's defaults: the memory budget counts them per connection.
-        .initial_connection_window_size(crate::budget::GRPC_CONNECTION_WINDOW)
-        .initial_stream_window_size(crate::budget::GRPC_CONNECTION_WINDOW)
-        .http2_keepalive_interval(keepalive.map(|k| k.0))
-        .http2_keepalive_timeout(keepalive.map(|k| k.1))
-        .layer(axum::middleware::map_response(
-            remap_transport_status::<tonic::body::Body>,
-        ))
-        .layer(ArrivalLayer::new(arrivals))
-        .add_service(uavnav)
-        .add_service(health_service);
+    let mut routes = tonic::service::Routes::builder();
+    routes.add_service(uavnav).add_service(health_service);
     if config.grpc.reflection {
         let fds = uavnav_proto::FILE_DESCRIPTOR_SET;
         let reflection_v1 = tonic_reflection::server::Builder::configure()
@@ -312,10 +302,22 @@ async fn serve_grpc(
             .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
             .build_v1alpha()
             .map_err(|e| anyhow!("reflection v1alpha: {e}"))?;
-        router = router
+        routes
             .add_service(reflection_v1)
             .add_service(reflection_v1alpha);
     }
+    let routes = tower::ServiceBuilder::new()
+        .layer(axum::middleware::map_response(
+            remap_transport_status::<tonic::body::Body>,
+        ))
+        .layer(ArrivalLayer::new(arrivals))
+        .service(routes.routes().prepare());
+    let settings = Http2Settings {
+        max_streams: config.grpc.max_streams_per_connection,
+        // Stated, not left to hyper's defaults: the memory budget counts them per connection.
+        receive_window: crate::budget::GRPC_CONNECTION_WINDOW,
+        keepalive,
+    };
     let shutdown = async {
         let _ = stop_rx.await;
     };
@@ -336,14 +338,7 @@ async fn serve_grpc(
         conn_metrics,
         stop,
     );
-    let task = tokio::spawn(async move {
-        if let Err(e) = router
-            .serve_with_incoming_shutdown(conn::incoming(conns), shutdown)
-            .await
-        {
-            warn!(error = %e, "gRPC server ended with an error");
-        }
-    });
+    let task = tokio::spawn(grpc_serve::serve(conns, routes, settings, shutdown));
     Ok((addr, (task, stop_tx)))
 }
 

@@ -22,6 +22,9 @@ pub use uavnav_proto::compact::{Pose, PoseBatch};
 pub const POSE_CAPACITY: usize = 1 << 14;
 /// Health reports ring size.
 pub const HEALTH_CAPACITY: usize = 1 << 14;
+/// Most poses in one batch (an actor that publishes more sends several batches): a ring slot
+/// then holds at most `MAX_BATCH_POSES × size_of::<Pose>()` bytes of poses.
+pub const MAX_BATCH_POSES: usize = 16;
 
 /// The output channels plus the service-wide shutdown signal.
 #[derive(Debug, Clone)]

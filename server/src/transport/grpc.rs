@@ -11,8 +11,7 @@ use std::pin::Pin;
 use std::sync::Arc;
 
 use futures::{Stream, StreamExt};
-use tokio::sync::{broadcast, mpsc, watch};
-use tokio_stream::wrappers::ReceiverStream;
+use tokio::sync::{broadcast, watch};
 use tonic::{Request, Response, Status, Streaming};
 use uavnav_proto::v1 as pb;
 use uavnav_proto::v1::uav_nav_server::UavNav;
@@ -23,8 +22,10 @@ use crate::metrics::{Cause, Kind, Outcome, Transport};
 use crate::output::hub::{HealthReport, PoseBatch};
 use crate::security::{Access, AuthTransport, PeerInfo};
 use crate::service::Service;
+use crate::transport::response_queue;
 
-/// Outgoing message queue of one watch stream.
+/// Outgoing message queue of one watch stream, in messages (and at most
+/// [`response_queue::RESPONSE_QUEUE_BYTES`]).
 const WATCH_QUEUE: usize = 1024;
 
 /// The service implementation.
@@ -176,9 +177,20 @@ async fn ack_envelope(service: &Service, access: &Access, e: pb::SensorEnvelope)
             )
         }
     };
+    let mut vehicle_id = e.vehicle_id;
+    // An id over the limit was refused: it is echoed cut at the limit, so that an acknowledgement
+    // never carries back megabytes the client sent as an id.
+    if vehicle_id.len() > validate::MAX_ID_LEN {
+        let mut end = validate::MAX_ID_LEN;
+        while !vehicle_id.is_char_boundary(end) {
+            end -= 1;
+        }
+        vehicle_id.truncate(end);
+        vehicle_id.shrink_to_fit();
+    }
     pb::IngestAck {
         sequence: e.sequence,
-        vehicle_id: e.vehicle_id,
+        vehicle_id,
         status: verdict.status as i32,
         reason: verdict.reason.into(),
         needs_config: verdict.needs_config,
@@ -230,6 +242,8 @@ trait Watched: Send + Sync + 'static {
     fn len(&self) -> usize;
     /// Message `i` as sent.
     fn message(&self, i: usize) -> Option<Self::Out>;
+    /// The bytes a queued message holds.
+    fn held_bytes(out: &Self::Out) -> usize;
 }
 
 impl Watched for HealthReport {
@@ -242,6 +256,9 @@ impl Watched for HealthReport {
     }
     fn message(&self, _: usize) -> Option<Self::Out> {
         Some((*self.health).clone())
+    }
+    fn held_bytes(out: &Self::Out) -> usize {
+        response_queue::held_bytes(out)
     }
 }
 
@@ -256,6 +273,10 @@ impl Watched for PoseBatch {
     fn message(&self, i: usize) -> Option<Self::Out> {
         self.wire(i)
     }
+    fn held_bytes(out: &Self::Out) -> usize {
+        // Its nested messages are inline: the id is its only heap.
+        std::mem::size_of::<Self::Out>() + out.vehicle_id.capacity()
+    }
 }
 
 /// Forwards the selected, decimated messages of a broadcast channel to a watch stream until the
@@ -266,7 +287,7 @@ fn watch_stream<T: Watched>(
     mut stopping: watch::Receiver<bool>,
     lagged: prometheus_client::metrics::counter::Counter,
 ) -> BoxStream<T::Out> {
-    let (tx, out) = mpsc::channel(WATCH_QUEUE);
+    let (tx, out) = response_queue::channel(WATCH_QUEUE);
     tokio::spawn(async move {
         let mut filter = WatchFilter::new(sel);
         loop {
@@ -284,7 +305,8 @@ fn watch_stream<T: Watched>(
                     Ok(m) => {
                         for i in filter.keep(m.vehicle_id(), m.len()) {
                             let Some(out) = m.message(i) else { continue };
-                            if tx.send(Ok(out)).await.is_err() {
+                            let bytes = T::held_bytes(&out);
+                            if tx.send(Ok(out), bytes).await.is_err() {
                                 return;
                             }
                         }
@@ -305,7 +327,7 @@ fn watch_stream<T: Watched>(
             }
         }
     });
-    Box::pin(ReceiverStream::new(out))
+    Box::pin(out)
 }
 
 /// A watch's selector plus its per-vehicle decimation counters.
@@ -361,7 +383,7 @@ impl UavNav for UavNavService {
         let mut inbound = request.into_inner();
         // Bounded: when the client stops reading acks we stop reading envelopes (HTTP/2 flow
         // control then pushes back on the sender).
-        let (tx, rx) = mpsc::channel(self.ack_buffer);
+        let (tx, rx) = response_queue::channel(self.ack_buffer);
         let service = self.service.clone();
         let mut stopping = self.stopping();
         tokio::spawn(async move {
@@ -384,19 +406,21 @@ impl UavNav for UavNavService {
                             metrics.input(Transport::Grpc, Kind::Malformed, outcome, 1);
                             metrics.refuse(Transport::Grpc, Kind::Malformed, cause);
                         }
-                        let _ = tx.send(Err(status)).await;
+                        let bytes = status.message().len();
+                        let _ = tx.send(Err(status), bytes).await;
                         break;
                     }
                     Some(Ok(envelope)) => {
                         let ack = ack_envelope(&service, &access, envelope).await;
-                        if tx.send(Ok(ack)).await.is_err() {
+                        let bytes = response_queue::held_bytes(&ack);
+                        if tx.send(Ok(ack), bytes).await.is_err() {
                             break;
                         }
                     }
                 }
             }
         });
-        Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
+        Ok(Response::new(Box::pin(rx)))
     }
 
     async fn watch_poses(

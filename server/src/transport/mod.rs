@@ -6,7 +6,9 @@
 //! | [`arrivals`] | one byte budget for the gRPC messages arriving on all streams (`grpc.arrival_bytes`) |
 //! | [`conn`] | every TCP listener's accept loop: connection limits, idle timeout, TLS handshakes, the file-descriptor budget |
 //! | [`grpc`] | the tonic `uavnav.v1.UavNav` service |
+//! | [`grpc_serve`] | the gRPC port's HTTP/2 connections, with every buffer set here (the per-stream send buffer among them) |
 //! | [`http`] | `/metrics`, `/livez`, `/readyz` |
+//! | [`response_queue`] | the queue of a gRPC response stream (acknowledgements, watches), bounded in bytes |
 //! | [`zenoh`] | the embedded Zenoh session: inputs, outputs, queryables, liveliness |
 //! | [`zenoh_out`] | the Zenoh output task: poses and health put only while a remote subscriber matches their leaf |
 //! | [`zenoh_stats`] | what Zenoh dropped on congested links, read from its runtime into `/metrics` |
@@ -14,7 +16,9 @@
 pub mod arrivals;
 pub mod conn;
 pub mod grpc;
+pub mod grpc_serve;
 pub mod http;
+pub mod response_queue;
 pub mod zenoh;
 pub mod zenoh_out;
 pub mod zenoh_stats;

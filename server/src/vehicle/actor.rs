@@ -20,7 +20,7 @@ use uavnav_core::{
 use crate::config::VehiclesConfig;
 use crate::metrics::Metrics;
 use crate::output::health::{HealthReport, HealthWindow, repeats};
-use crate::output::hub::{Hub, Pose, PoseBatch};
+use crate::output::hub::{Hub, MAX_BATCH_POSES, Pose, PoseBatch};
 use crate::vehicle::budgets::{CameraBytes, CameraPixels, InputBytes, Reserved};
 use crate::vehicle::engine::{
     ActorStep, BoxedEngine, FrameFailureKind, PoolJob, SharedFactory, VisionOutcome,
@@ -661,13 +661,26 @@ impl Actor {
         self.stamp();
         self.stamped = 0;
         let n = self.outbox.len();
-        let batch = Arc::new(PoseBatch {
-            vehicle_id: Arc::clone(&self.shared.id),
-            poses: std::mem::replace(&mut self.outbox, Vec::with_capacity(n)),
-        });
-        self.shared.set_latest_pose(Arc::clone(&batch));
+        let mut poses =
+            std::mem::replace(&mut self.outbox, Vec::with_capacity(n.min(MAX_BATCH_POSES)));
+        // At most MAX_BATCH_POSES a batch, so that the ring's slots, which a lagging watcher
+        // keeps, hold a bounded number of bytes (a backlog drained at once, or a message of
+        // thousands of samples, would otherwise make one batch of thousands of poses).
+        loop {
+            let rest = (poses.len() > MAX_BATCH_POSES).then(|| poses.split_off(MAX_BATCH_POSES));
+            let batch = Arc::new(PoseBatch {
+                vehicle_id: Arc::clone(&self.shared.id),
+                poses,
+            });
+            let Some(rest) = rest else {
+                self.shared.set_latest_pose(Arc::clone(&batch));
+                let _ = self.ctx.hub.poses.send(batch);
+                break;
+            };
+            let _ = self.ctx.hub.poses.send(batch);
+            poses = rest;
+        }
         self.shared.announce(&self.ctx.hub.lifecycle);
-        let _ = self.ctx.hub.poses.send(batch);
         self.ctx.metrics.poses.inc_by(n as u64);
     }
 
