@@ -158,7 +158,8 @@ pub struct GrpcConfig {
     pub addr: SocketAddr,
     /// Largest accepted (decoded) message, bytes. Sized for 1080p JPEG frames.
     pub max_message_bytes: usize,
-    /// Ingest acknowledgements buffered per stream before the stream stops reading (flow control).
+    /// Ingest acknowledgements buffered per stream before the stream stops reading (flow control);
+    /// at most `transport::response_queue::RESPONSE_QUEUE_BYTES` of them whatever this says.
     pub ack_buffer: usize,
     /// Serve gRPC server reflection (lets any caller list the API; off by default).
     pub reflection: bool,

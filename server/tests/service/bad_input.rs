@@ -262,3 +262,19 @@ async fn vehicle_limit_is_resource_exhausted() {
     assert!(acks[2].reason.contains("vehicle limit"));
     server.shutdown().await.unwrap();
 }
+
+/// An id over the limit is refused, and its acknowledgement echoes it cut at the limit: a client
+/// that sends megabytes as an id does not get them back (and the ack queue does not hold them).
+#[tokio::test]
+async fn an_overlong_id_is_refused_and_echoed_cut_at_the_limit() {
+    let server = start(test_config()).await;
+    let mut c = client(&server).await;
+    let long = "v".repeat(1 << 20);
+    let acks = ingest(&mut c, vec![imu_env(&long, 1, vec![imu(1_000_000_000)])])
+        .await
+        .unwrap();
+    let (status, reason) = status_of(&acks, 1);
+    assert_eq!(status, pb::IngestStatus::InvalidArgument, "{reason}");
+    assert!(reason.contains("longer than 128"), "{reason}");
+    assert_eq!(acks[0].vehicle_id, "v".repeat(128));
+}
