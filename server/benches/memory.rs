@@ -315,72 +315,13 @@ async fn stalled_readers(
     flight: &[pb::SensorEnvelope],
     vehicles: usize,
 ) -> usize {
-    use prost::Message as _;
-    let request = pb::WatchRequest {
-        all: true,
-        ..Default::default()
-    }
-    .encode_to_vec();
-    let mut body = vec![0u8];
-    body.extend_from_slice(&(request.len() as u32).to_be_bytes());
-    body.extend_from_slice(&request);
-    let body = bytes::Bytes::from(body);
     let mut held = Vec::new();
     let mut opened = 0;
     for _ in 0..conns {
-        let Ok(tcp) = tokio::net::TcpStream::connect(server.grpc_addr).await else {
-            continue;
-        };
-        let Ok((mut h2c, conn)) = h2::client::Builder::new()
-            .initial_window_size(i32::MAX as u32)
-            .initial_connection_window_size(i32::MAX as u32)
-            .handshake::<_, bytes::Bytes>(tcp)
-            .await
-        else {
-            continue;
-        };
-        // The connection is polled until the service has answered every stream, then held
-        // without polling: nothing reads its socket any more.
-        let (freeze, frozen) = tokio::sync::oneshot::channel::<()>();
-        let driver = tokio::spawn(async move {
-            let mut conn = conn;
-            tokio::select! {
-                _ = &mut conn => None,
-                _ = frozen => Some(conn),
-            }
-        });
-        let mut responses = Vec::new();
-        for _ in 0..streams {
-            let req = tonic::codegen::http::Request::builder()
-                .method("POST")
-                .uri(format!(
-                    "http://{}/uavnav.v1.UavNav/WatchPoses",
-                    server.grpc_addr
-                ))
-                .header("content-type", "application/grpc")
-                .header("te", "trailers")
-                .body(())
-                .unwrap();
-            let Ok(ready) = h2c.clone().ready().await else {
-                break;
-            };
-            h2c = ready;
-            let Ok((resp, mut send)) = h2c.send_request(req, false) else {
-                break;
-            };
-            let _ = send.send_data(body.clone(), true);
-            responses.push(resp);
+        if let Some(c) = stalled_watch(server.grpc_addr, streams).await {
+            opened += c.streams();
+            held.push(c);
         }
-        let mut bodies = Vec::new();
-        for r in responses {
-            if let Ok(Ok(resp)) = tokio::time::timeout(Duration::from_secs(5), r).await {
-                bodies.push(resp.into_body());
-            }
-        }
-        opened += bodies.len();
-        let _ = freeze.send(());
-        let conn = driver.await.ok().flatten();
-        held.push((h2c, conn, bodies));
     }
     let c = client(server).await;
     let sends = (0..vehicles).map(|v| {

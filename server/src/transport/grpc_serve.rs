@@ -6,7 +6,9 @@
 //! poses) could hold that much for a peer that stops reading, and the worst-case memory budget
 //! had to count 448 KiB per stream (15 GiB at the defaults' 1,024 connections × 32 streams).
 //! Served here, [`STREAM_SEND_BUFFER`] bounds it. Each request carries the connection's
-//! [`PeerInfo`] (its verified certificate names), as tonic's own server inserts it.
+//! [`PeerInfo`] (its verified certificate names), as tonic's own server inserts it. tonic's server
+//! also cancelled a call at the client's `grpc-timeout`; here the client's own deadline does it
+//! (it resets the stream, and hyper drops the call).
 
 use std::convert::Infallible;
 use std::future::Future;
@@ -14,15 +16,13 @@ use std::pin::Pin;
 use std::task::{Context, Poll};
 use std::time::Duration;
 
-use hyper_util::rt::{TokioExecutor, TokioIo, TokioTimer};
+use hyper_util::rt::{TokioExecutor, TokioTimer};
 use hyper_util::server::conn::auto;
-use hyper_util::server::graceful::GracefulShutdown;
 use hyper_util::service::TowerToHyperService;
 use tokio::sync::mpsc;
 use tonic::body::Body;
 use tonic::codegen::http::{Request, Response};
 use tonic::transport::server::Connected;
-use tracing::debug;
 
 use crate::security::PeerInfo;
 use crate::transport::conn::Conn;
@@ -46,7 +46,7 @@ pub struct Http2Settings {
 /// Serves `routes` on the connections of `conns` until `shutdown`, then closes idle
 /// connections and lets calls in progress finish (the caller bounds that wait).
 pub async fn serve<S, B>(
-    mut conns: mpsc::Receiver<Conn>,
+    conns: mpsc::Receiver<Conn>,
     routes: S,
     settings: Http2Settings,
     shutdown: impl Future<Output = ()>,
@@ -69,32 +69,13 @@ pub async fn serve<S, B>(
         .keep_alive_interval(settings.keepalive.map(|k| k.0))
         .keep_alive_timeout(settings.keepalive.map_or(Duration::from_secs(20), |k| k.1))
         .max_send_buf_size(STREAM_SEND_BUFFER);
-    let graceful = GracefulShutdown::new();
-    tokio::pin!(shutdown);
-    let mut accepting = true;
-    loop {
-        tokio::select! {
-            c = conns.recv(), if accepting => {
-                let Some(c) = c else {
-                    accepting = false;
-                    continue;
-                };
-                let service = TowerToHyperService::new(WithPeer {
-                    inner: routes.clone(),
-                    peer: c.connect_info(),
-                });
-                let conn = builder.serve_connection(TokioIo::new(c), service).into_owned();
-                let conn = graceful.watch(conn);
-                tokio::spawn(async move {
-                    if let Err(e) = conn.await {
-                        debug!(error = %e, "gRPC connection ended");
-                    }
-                });
-            }
-            () = &mut shutdown => break,
-        }
-    }
-    graceful.shutdown().await;
+    let service = |c: &Conn| {
+        TowerToHyperService::new(WithPeer {
+            inner: routes.clone(),
+            peer: c.connect_info(),
+        })
+    };
+    crate::transport::http::serve_each(conns, &builder, "gRPC", service, shutdown).await;
 }
 
 /// Gives each request of one connection its [`PeerInfo`] and tonic's body type.

@@ -21,6 +21,8 @@ use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::IntoResponse;
 use axum::routing::get;
 
+use axum::http::{Request, Response};
+use hyper::body::Incoming;
 use hyper_util::rt::{TokioExecutor, TokioIo, TokioTimer};
 use hyper_util::server::conn::auto;
 use hyper_util::server::graceful::GracefulShutdown;
@@ -56,7 +58,7 @@ pub fn router(state: HttpState) -> Router {
 /// Serves `app` on the connections of `conns` until `shutdown`, then closes idle connections
 /// and lets requests in progress finish (the caller bounds that wait).
 pub async fn serve(
-    mut conns: mpsc::Receiver<Conn>,
+    conns: mpsc::Receiver<Conn>,
     app: Router,
     header_timeout: Duration,
     shutdown: impl Future<Output = ()>,
@@ -67,6 +69,34 @@ pub async fn serve(
         .timer(TokioTimer::new())
         .header_read_timeout(header_timeout);
     builder.http2().timer(TokioTimer::new());
+    serve_each(
+        conns,
+        &builder,
+        "HTTP",
+        |_| TowerToHyperService::new(app.clone()),
+        shutdown,
+    )
+    .await;
+}
+
+/// Serves each connection of `conns` with `builder` and the service `service(&conn)` makes for
+/// it, until `shutdown`; then closes idle connections and lets requests in progress finish (the
+/// caller bounds that wait). `what` names the port in the log. The gRPC port uses it too
+/// ([`crate::transport::grpc_serve`]).
+pub async fn serve_each<S, B>(
+    mut conns: mpsc::Receiver<Conn>,
+    builder: &auto::Builder<TokioExecutor>,
+    what: &'static str,
+    mut service: impl FnMut(&Conn) -> S,
+    shutdown: impl Future<Output = ()>,
+) where
+    S: hyper::service::Service<Request<Incoming>, Response = Response<B>> + Send + 'static,
+    S::Future: Send + 'static,
+    S::Error: Into<Box<dyn std::error::Error + Send + Sync>>,
+    B: http_body::Body + Send + 'static,
+    B::Data: Send,
+    B::Error: Into<Box<dyn std::error::Error + Send + Sync>>,
+{
     let graceful = GracefulShutdown::new();
     tokio::pin!(shutdown);
     let mut accepting = true;
@@ -78,12 +108,12 @@ pub async fn serve(
                     accepting = false;
                     continue;
                 };
-                let service = TowerToHyperService::new(app.clone());
-                let conn = builder.serve_connection(TokioIo::new(c), service).into_owned();
+                let svc = service(&c);
+                let conn = builder.serve_connection(TokioIo::new(c), svc).into_owned();
                 let conn = graceful.watch(conn);
                 tokio::spawn(async move {
                     if let Err(e) = conn.await {
-                        debug!(error = %e, "HTTP connection ended");
+                        debug!(error = %e, "{what} connection ended");
                     }
                 });
             }

@@ -299,3 +299,78 @@ pub async fn zenoh_peer(connect: &str) -> zenoh::Session {
         .unwrap();
     zenoh::open(c).await.unwrap()
 }
+
+/// A raw HTTP/2 connection whose `WatchPoses` streams (all vehicles) the service has answered,
+/// held without reading its socket any more: a peer that stops reading. Its windows are
+/// 2³¹ − 1 bytes, so flow control never holds the service back; the service's own buffers do.
+/// Dropping it closes the connection.
+pub struct StalledWatch {
+    _client: h2::client::SendRequest<bytes::Bytes>,
+    _conn: h2::client::Connection<tokio::net::TcpStream, bytes::Bytes>,
+    bodies: Vec<h2::RecvStream>,
+}
+
+impl StalledWatch {
+    /// The streams the service answered.
+    pub fn streams(&self) -> usize {
+        self.bodies.len()
+    }
+}
+
+/// Opens `streams` `WatchPoses` streams on one new connection to `addr` and stops reading once
+/// they are answered (`None` if the connection failed).
+pub async fn stalled_watch(addr: std::net::SocketAddr, streams: u32) -> Option<StalledWatch> {
+    use prost::Message as _;
+    let request = pb::WatchRequest {
+        all: true,
+        ..Default::default()
+    }
+    .encode_to_vec();
+    let mut body = vec![0u8];
+    body.extend_from_slice(&(request.len() as u32).to_be_bytes());
+    body.extend_from_slice(&request);
+    let body = bytes::Bytes::from(body);
+    let tcp = tokio::net::TcpStream::connect(addr).await.ok()?;
+    let (mut h2c, conn) = h2::client::Builder::new()
+        .initial_window_size(i32::MAX as u32)
+        .initial_connection_window_size(i32::MAX as u32)
+        .handshake::<_, bytes::Bytes>(tcp)
+        .await
+        .ok()?;
+    // Polled until the service has answered every stream, then held without polling.
+    let (freeze, frozen) = tokio::sync::oneshot::channel::<()>();
+    let driver = tokio::spawn(async move {
+        let mut conn = conn;
+        tokio::select! {
+            _ = &mut conn => None,
+            _ = frozen => Some(conn),
+        }
+    });
+    let mut responses = Vec::new();
+    for _ in 0..streams {
+        let req = tonic::codegen::http::Request::builder()
+            .method("POST")
+            .uri(format!("http://{addr}/uavnav.v1.UavNav/WatchPoses"))
+            .header("content-type", "application/grpc")
+            .header("te", "trailers")
+            .body(())
+            .ok()?;
+        h2c = h2c.clone().ready().await.ok()?;
+        let (resp, mut send) = h2c.send_request(req, false).ok()?;
+        let _ = send.send_data(body.clone(), true);
+        responses.push(resp);
+    }
+    let mut bodies = Vec::new();
+    for r in responses {
+        if let Ok(Ok(resp)) = tokio::time::timeout(Duration::from_secs(5), r).await {
+            bodies.push(resp.into_body());
+        }
+    }
+    let _ = freeze.send(());
+    let conn = driver.await.ok().flatten()?;
+    Some(StalledWatch {
+        _client: h2c,
+        _conn: conn,
+        bodies,
+    })
+}

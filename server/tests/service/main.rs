@@ -31,6 +31,7 @@ mod reconfigure;
 mod record;
 mod security;
 mod shutdown;
+mod stalled_watch;
 mod zenoh;
 mod zenoh_security;
 mod zenoh_slow;
