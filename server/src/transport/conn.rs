@@ -453,13 +453,6 @@ pub fn accept(
     rx
 }
 
-/// The connections as the stream tonic's `serve_with_incoming` takes.
-pub fn incoming(
-    rx: mpsc::Receiver<Conn>,
-) -> impl futures::Stream<Item = Result<Conn, io::Error>> + Send + 'static {
-    futures::StreamExt::map(tokio_stream::wrappers::ReceiverStream::new(rx), Ok)
-}
-
 /// The file descriptors the configuration may need at once.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FdBudget {
