@@ -220,7 +220,7 @@ pub fn ingest_path(
             queued: Default::default(),
             limit: config.vision.queue_bytes,
         },
-        input_bytes: crate::vehicle::budgets::InputBytes::new(config.vehicles.input_bytes),
+        input_bytes: crate::vehicle::budgets::ByteBudget::new(config.vehicles.input_bytes),
         camera_pixels: crate::vehicle::budgets::CameraPixels::new(
             config.vision.max_total_camera_pixels,
         ),

@@ -406,13 +406,16 @@ impl UavNav for UavNavService {
                             metrics.input(Transport::Grpc, Kind::Malformed, outcome, 1);
                             metrics.refuse(Transport::Grpc, Kind::Malformed, cause);
                         }
-                        let bytes = status.message().len();
+                        let bytes = std::mem::size_of::<Status>() + status.message().len();
                         let _ = tx.send(Err(status), bytes).await;
                         break;
                     }
                     Some(Ok(envelope)) => {
                         let ack = ack_envelope(&service, &access, envelope).await;
-                        let bytes = response_queue::held_bytes(&ack);
+                        // Two strings are its only heap (no encoding pass on the ingest path).
+                        let bytes = std::mem::size_of::<pb::IngestAck>()
+                            + ack.vehicle_id.capacity()
+                            + ack.reason.capacity();
                         if tx.send(Ok(ack), bytes).await.is_err() {
                             break;
                         }

@@ -66,9 +66,13 @@ pub async fn serve<S, B>(
         .initial_connection_window_size(settings.receive_window)
         .initial_stream_window_size(settings.receive_window)
         .max_concurrent_streams(settings.max_streams)
-        .keep_alive_interval(settings.keepalive.map(|k| k.0))
-        .keep_alive_timeout(settings.keepalive.map_or(Duration::from_secs(20), |k| k.1))
         .max_send_buf_size(STREAM_SEND_BUFFER);
+    if let Some((interval, timeout)) = settings.keepalive {
+        builder
+            .http2()
+            .keep_alive_interval(interval)
+            .keep_alive_timeout(timeout);
+    }
     let service = |c: &Conn| {
         TowerToHyperService::new(WithPeer {
             inner: routes.clone(),

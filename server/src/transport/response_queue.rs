@@ -5,18 +5,17 @@
 //! watch stream held 1,024 messages of up to a few hundred bytes each plus their heap: about
 //! 1 MiB per stream measured with 128 stalled watch streams (`cargo bench -p uavnavd --bench
 //! memory -- --only 6`), which the worst-case budget did not count. Here the sender waits while
-//! [`RESPONSE_QUEUE_BYTES`] are queued; the receiving stream gives the bytes back as it takes
-//! each message, before encoding it.
+//! [`RESPONSE_QUEUE_BYTES`] are queued (a [`ByteBudget`], as the actors' sensor queues have); the
+//! receiving stream gives the bytes back as it takes each message, before encoding it.
 
-use std::pin::Pin;
-use std::sync::Arc;
-use std::task::{Context, Poll};
+use futures::StreamExt;
+use tokio::sync::{OwnedSemaphorePermit, mpsc};
+use tokio_stream::wrappers::ReceiverStream;
 
-use futures::Stream;
-use tokio::sync::{Semaphore, mpsc};
+use crate::vehicle::budgets::ByteBudget;
 
 /// Most bytes one response stream holds queued (messages as held in memory: the struct and its
-/// heap, estimated by [`held_bytes`]).
+/// heap, estimated by the caller; [`held_bytes`] for a message with repeated fields).
 pub const RESPONSE_QUEUE_BYTES: usize = 128 << 10;
 
 /// The bytes a queued message holds: its struct and about its encoded length of heap (strings,
@@ -28,40 +27,37 @@ pub fn held_bytes<M: prost::Message>(m: &M) -> usize {
 /// The sending half.
 #[derive(Debug)]
 pub struct Sender<T> {
-    tx: mpsc::Sender<(T, u32)>,
-    room: Arc<Semaphore>,
+    tx: mpsc::Sender<(T, OwnedSemaphorePermit)>,
+    room: ByteBudget,
 }
+
+/// The receiving half: the response stream. It gives each message's bytes back as it takes it
+/// (the permit is dropped there).
+pub type Receiver<T> = futures::stream::Map<
+    ReceiverStream<(T, OwnedSemaphorePermit)>,
+    fn((T, OwnedSemaphorePermit)) -> T,
+>;
 
 /// A queue of at most `messages` messages and [`RESPONSE_QUEUE_BYTES`] bytes.
 pub fn channel<T>(messages: usize) -> (Sender<T>, Receiver<T>) {
     let (tx, rx) = mpsc::channel(messages);
-    let room = Arc::new(Semaphore::new(RESPONSE_QUEUE_BYTES));
-    (
-        Sender {
-            tx,
-            room: Arc::clone(&room),
-        },
-        Receiver { rx, room },
-    )
+    let room = ByteBudget::new(RESPONSE_QUEUE_BYTES);
+    let take: fn((T, OwnedSemaphorePermit)) -> T = |(item, _bytes)| item;
+    (Sender { tx, room }, ReceiverStream::new(rx).map(take))
 }
 
 impl<T> Sender<T> {
     /// Queues `item` of `bytes` bytes, waiting for room; `Err` when the stream is gone. A message
     /// larger than the whole queue waits until the queue is empty.
     pub async fn send(&self, item: T, bytes: usize) -> Result<(), T> {
-        let n = bytes.clamp(1, RESPONSE_QUEUE_BYTES) as u32;
         let permit = tokio::select! {
-            p = self.room.acquire_many(n) => p,
+            p = self.room.reserve(bytes.max(1)) => p,
             () = self.tx.closed() => return Err(item),
         };
-        match permit {
-            Ok(p) => p.forget(),
-            Err(_) => return Err(item),
-        }
-        self.tx.send((item, n)).await.map_err(|e| {
-            self.room.add_permits(e.0.1 as usize);
-            e.0.0
-        })
+        let Some(permit) = permit else {
+            return Err(item);
+        };
+        self.tx.send((item, permit)).await.map_err(|e| e.0.0)
     }
 
     /// Resolves when the receiving stream is dropped.
@@ -70,30 +66,9 @@ impl<T> Sender<T> {
     }
 }
 
-/// The receiving half: a stream of the messages, giving their bytes back as each is taken.
-#[derive(Debug)]
-pub struct Receiver<T> {
-    rx: mpsc::Receiver<(T, u32)>,
-    room: Arc<Semaphore>,
-}
-
-impl<T> Stream for Receiver<T> {
-    type Item = T;
-
-    fn poll_next(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Option<T>> {
-        self.rx.poll_recv(cx).map(|m| {
-            m.map(|(item, n)| {
-                self.room.add_permits(n as usize);
-                item
-            })
-        })
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use futures::StreamExt;
 
     #[tokio::test]
     async fn the_sender_waits_while_the_bytes_are_queued_and_goes_on_as_they_are_taken() {

@@ -21,7 +21,7 @@ use crate::config::VehiclesConfig;
 use crate::metrics::Metrics;
 use crate::output::health::{HealthReport, HealthWindow, repeats};
 use crate::output::hub::{Hub, MAX_BATCH_POSES, Pose, PoseBatch};
-use crate::vehicle::budgets::{CameraBytes, CameraPixels, InputBytes, Reserved};
+use crate::vehicle::budgets::{ByteBudget, CameraBytes, CameraPixels, Reserved};
 use crate::vehicle::engine::{
     ActorStep, BoxedEngine, FrameFailureKind, PoolJob, SharedFactory, VisionOutcome,
 };
@@ -57,7 +57,7 @@ pub struct Ctx {
     /// Compressed camera bytes queued at all actors, and their limit (`vision.queue_bytes`).
     pub camera_bytes: CameraBytes,
     /// Decoded sensor bytes queued at all actors (`vehicles.input_bytes`).
-    pub input_bytes: InputBytes,
+    pub input_bytes: ByteBudget,
     /// Pixels of all configured cameras (`vision.max_total_camera_pixels`).
     pub camera_pixels: CameraPixels,
 }
@@ -198,7 +198,7 @@ pub struct VehicleHandle {
     pub shared: Arc<VehicleShared>,
     tx: mpsc::Sender<Msg>,
     /// Decoded sensor bytes queued at this vehicle (`vehicles.input_queue_bytes`).
-    budget: InputBytes,
+    budget: ByteBudget,
 }
 
 impl VehicleHandle {
@@ -318,7 +318,7 @@ pub fn spawn(
     VehicleHandle {
         shared,
         tx,
-        budget: InputBytes::new(ctx_budget),
+        budget: ByteBudget::new(ctx_budget),
     }
 }
 
@@ -665,23 +665,33 @@ impl Actor {
             std::mem::replace(&mut self.outbox, Vec::with_capacity(n.min(MAX_BATCH_POSES)));
         // At most MAX_BATCH_POSES a batch, so that the ring's slots, which a lagging watcher
         // keeps, hold a bounded number of bytes (a backlog drained at once, or a message of
-        // thousands of samples, would otherwise make one batch of thousands of poses).
-        loop {
-            let rest = (poses.len() > MAX_BATCH_POSES).then(|| poses.split_off(MAX_BATCH_POSES));
-            let batch = Arc::new(PoseBatch {
-                vehicle_id: Arc::clone(&self.shared.id),
-                poses,
-            });
-            let Some(rest) = rest else {
-                self.shared.set_latest_pose(Arc::clone(&batch));
-                let _ = self.ctx.hub.poses.send(batch);
-                break;
-            };
-            let _ = self.ctx.hub.poses.send(batch);
-            poses = rest;
+        // thousands of samples, would otherwise make one batch of thousands of poses). The usual
+        // outbox goes as it is; a larger one is moved out in chunks, each pose once.
+        if n > MAX_BATCH_POSES {
+            let mut rest = poses.into_iter();
+            while rest.len() > MAX_BATCH_POSES {
+                self.send_batch(rest.by_ref().take(MAX_BATCH_POSES).collect(), false);
+            }
+            poses = rest.collect::<Vec<_>>();
         }
+        // A vector that grew past its length keeps its capacity: the slot counts that.
+        poses.shrink_to(MAX_BATCH_POSES);
+        self.send_batch(poses, true);
         self.shared.announce(&self.ctx.hub.lifecycle);
         self.ctx.metrics.poses.inc_by(n as u64);
+    }
+
+    /// Puts one batch of this vehicle's poses on the hub, the `latest` one (the vehicle's pose
+    /// now) first where `GetPose` reads it.
+    fn send_batch(&self, poses: Vec<Pose>, latest: bool) {
+        let batch = Arc::new(PoseBatch {
+            vehicle_id: Arc::clone(&self.shared.id),
+            poses,
+        });
+        if latest {
+            self.shared.set_latest_pose(Arc::clone(&batch));
+        }
+        let _ = self.ctx.hub.poses.send(batch);
     }
 
     /// The arrival of the IMU sample a pose at `t_ns` was made from (the newest one not after it).

@@ -1,5 +1,5 @@
 //! The service-wide budgets the actors share: the bytes of queued sensor data (per vehicle and
-//! for all, as semaphores with a permit per byte), the bytes of queued camera frames, and the
+//! for all, as [`ByteBudget`]s: semaphores with a permit per byte), the bytes of queued camera frames, and the
 //! pixels of all configured cameras. Each is one term of the memory formula (`crate::budget`).
 
 use std::sync::Arc;
@@ -53,15 +53,16 @@ impl CameraPixels {
     }
 }
 
-/// A byte budget of queued sensor data: a semaphore with one permit per byte. A message holds
-/// its permits until the actor takes it off the queue.
+/// A byte budget of a queue: a semaphore with one permit per byte. A message holds its permits
+/// until it is taken off the queue. The actors' sensor queues (per vehicle and for all) and each
+/// gRPC response stream's queue (`transport::response_queue`) are bounded with it.
 #[derive(Debug, Clone)]
-pub struct InputBytes {
+pub struct ByteBudget {
     permits: Arc<Semaphore>,
     limit: usize,
 }
 
-impl InputBytes {
+impl ByteBudget {
     /// A budget of `limit` bytes.
     pub fn new(limit: usize) -> Self {
         let limit = limit.min(Semaphore::MAX_PERMITS);
@@ -73,7 +74,7 @@ impl InputBytes {
 
     /// Waits for `bytes` (at most the whole budget, so that one large message always fits an
     /// empty queue).
-    pub(crate) async fn reserve(&self, bytes: usize) -> Option<OwnedSemaphorePermit> {
+    pub async fn reserve(&self, bytes: usize) -> Option<OwnedSemaphorePermit> {
         let n = u32::try_from(bytes.min(self.limit)).unwrap_or(u32::MAX);
         Arc::clone(&self.permits).acquire_many_owned(n).await.ok()
     }
@@ -103,11 +104,11 @@ pub struct CameraBytes {
 
 #[cfg(test)]
 mod tests {
-    use super::{CameraPixels, InputBytes};
+    use super::{ByteBudget, CameraPixels};
 
     #[tokio::test]
     async fn queued_bytes_wait_for_room_and_come_back_when_taken() {
-        let budget = InputBytes::new(1000);
+        let budget = ByteBudget::new(1000);
         let a = budget.reserve(600).await;
         assert_eq!(budget.used(), 600);
         // 600 more do not fit: the sender waits until the first message is taken.

@@ -237,3 +237,44 @@ async fn http_endpoints() {
     );
     server.shutdown().await.unwrap();
 }
+
+/// One message of 1,000 IMU samples: the actor publishes its poses in batches of at most
+/// `hub::MAX_BATCH_POSES` (so that the output ring's slots are bounded in bytes); a watcher gets
+/// all 1,000 in order, and `GetPose` the last.
+#[tokio::test]
+async fn a_large_message_reaches_watchers_whole_and_in_order() {
+    let server = start(test_config()).await;
+    let mut c = client(&server).await;
+    let mut watch = c
+        .watch_poses(pb::WatchRequest {
+            vehicle_ids: vec!["big".into()],
+            ..Default::default()
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let t0 = 1_000_000_000_000i64;
+    let samples: Vec<_> = (0..1000).map(|k| imu(t0 + 1 + k * 5_000_000)).collect();
+    let envs = vec![
+        config_env("big", 0, false),
+        gnss_env("big", 1, fix(t0)),
+        imu_env("big", 2, samples),
+    ];
+    ingest(&mut c, envs).await.unwrap();
+    for k in 0..1000 {
+        let p = tokio::time::timeout(Duration::from_secs(10), watch.message())
+            .await
+            .unwrap()
+            .unwrap()
+            .unwrap();
+        assert_eq!(p.t_ns, t0 + 1 + k * 5_000_000, "pose {k}");
+    }
+    let pose = c
+        .get_pose(pb::GetPoseRequest {
+            vehicle_id: "big".into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(pose.t_ns, t0 + 1 + 999 * 5_000_000);
+}
