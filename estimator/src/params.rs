@@ -129,6 +129,13 @@ pub struct EstimatorParams {
     /// (attitude NEES 1.5 / 1.0): less heading and pitch information from the video, so the big
     /// lever arm's own keeps the configurations apart (pitch 2.0×).
     pub paper_direction_cov_scale: f64,
+    /// Paper profile, OUR ADDITION (not in the paper): while no video pseudo-attitude chain runs,
+    /// fuse roll and pitch from the GNSS acceleration against the accelerometers over windows of
+    /// about a second (eq. T1 of `paper::gnss_tilt`). Without a camera the paper's attitude is
+    /// gyro integration, observable through the lever arm only; with a real airframe's lever arm
+    /// it drifted to 6–9° of roll/pitch RMSE on the shared real flights. `false` gives the
+    /// paper's filter as written.
+    pub paper_gnss_tilt: bool,
     /// Position σ above which the filter is declared diverged, m.
     pub diverged_pos_sigma_m: f64,
     /// 1-σ error of a magnetometer heading, rad: calibration residue and motor interference, which
@@ -198,6 +205,7 @@ impl Default for EstimatorParams {
             paper_chain_cov_scale: 6.0,
             paper_video_direction: true,
             paper_direction_cov_scale: 1.0,
+            paper_gnss_tilt: true,
             diverged_pos_sigma_m: 5_000.0,
             mag_heading_sigma_rad: 0.2,
             mag_max_inclination_error_rad: 10f64.to_radians(),

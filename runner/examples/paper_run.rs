@@ -19,7 +19,9 @@
 //! `--attitude-error-tau S` (paper: `EstimatorParams::paper_attitude_error_tau_s`),
 //! `--chain-cov-scale K` (paper: `EstimatorParams::paper_chain_cov_scale`), `--direction-cov-scale K`
 //! (paper: `EstimatorParams::paper_direction_cov_scale`), `--no-video-direction`
-//! (paper: `EstimatorParams::paper_video_direction = false`, the paper's VIDEO-IMU(1) as written).
+//! (paper: `EstimatorParams::paper_video_direction = false`, the paper's VIDEO-IMU(1) as written),
+//! `--no-gnss-tilt` (paper: `EstimatorParams::paper_gnss_tilt = false`, no roll and pitch from the
+//! GNSS acceleration while the video chain is not running).
 //! The README "Results" table takes roll/pitch/yaw RMSE, the outage drift and "within 3σ" from the
 //! first table row printed, and the position consistency from the `consistency:` line.
 //!
@@ -64,13 +66,14 @@ struct Args {
     chain_cov_scale: Option<f64>,
     direction_cov_scale: Option<f64>,
     video_direction: bool,
+    gnss_tilt: bool,
 }
 
 const USAGE: &str = "usage: paper_run [SCENARIO.toml] [--no-vision] [--profile eskf|paper] [--duration S]
     [--frames-csv F] [--frame-cache DIR] [--pixel-sigma PX] [--metric-scale-sigma REL]
     [--normal-sigma-deg D] [--vision-cov-scale K] [--joint | --separate]
     [--gyro-instability-psd Q] [--chain-cov-scale K] [--direction-cov-scale K]
-    [--no-video-direction]
+    [--no-video-direction] [--no-gnss-tilt]
 Runs simulator -> rendered frames -> vision -> estimator on one scenario (default
 scenarios/paper-small-lever.toml, profile eskf) and prints the accuracy row (roll/pitch/yaw RMSE
 after 30 s, outage drift, share of samples within 3 sigma), consistency, vision statistics and time.";
@@ -93,6 +96,7 @@ fn parse_args() -> Args {
         chain_cov_scale: None,
         direction_cov_scale: None,
         video_direction: true,
+        gnss_tilt: true,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -127,6 +131,7 @@ fn parse_args() -> Args {
                 a.direction_cov_scale = it.next().and_then(|s| s.parse().ok());
             }
             "--no-video-direction" => a.video_direction = false,
+            "--no-gnss-tilt" => a.gnss_tilt = false,
             "--help" | "-h" => {
                 println!("{USAGE}");
                 std::process::exit(0);
@@ -413,6 +418,7 @@ fn main() {
         params.estimator.paper_direction_cov_scale = k;
     }
     params.estimator.paper_video_direction = args.video_direction;
+    params.estimator.paper_gnss_tilt = args.gnss_tilt;
     if let Some(s) = args.metric_scale_sigma {
         params.vision.solve.metric_scale_sigma = s;
     }

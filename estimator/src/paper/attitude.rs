@@ -220,6 +220,27 @@ impl AttitudeEkf {
         self.update(&y, &h, &r, gate, t_ns, diag);
     }
 
+    /// Gated update of the GNSS-acceleration tilt measurement (eq. T1 of `gnss_tilt`): residual
+    /// `y`, Jacobian `h_e` w.r.t. the Euler angles, noise `r`, taken now.
+    pub fn update_tilt(
+        &mut self,
+        y: &Vector2<f64>,
+        h_e: &SMatrix<f64, 2, 3>,
+        r: &SMatrix<f64, 2, 2>,
+        gate: f64,
+        diag: &mut InnovDiag,
+    ) -> bool {
+        let mut h = SMatrix::<f64, 2, 6>::zeros();
+        h.fixed_view_mut::<2, 3>(0, 0).copy_from(h_e);
+        self.update(y, &h, r, gate, self.t_ns, diag)
+    }
+
+    /// Adds `var` (rad²) to the roll and pitch variances.
+    pub fn widen_tilt(&mut self, var: f64) {
+        self.p[(0, 0)] += var;
+        self.p[(1, 1)] += var;
+    }
+
     /// Joint part of a GNSS update (eqs. 32–33 through the lever arm, see `posvel`): the attitude
     /// correction `K_e y` with `K_e = P[:, e] H_eᵀ S⁻¹` for an innovation `y` whose covariance `s_inv`
     /// (inverse) the caller formed. Cross-covariances with the position/velocity filter are not

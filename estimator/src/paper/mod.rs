@@ -7,6 +7,7 @@
 //! | [`attitude`] | VIDEO-IMU(1): Euler angles from gyro rates (eq. 31) + video pseudo-attitude (eq. 34) |
 //! | [`posvel`] | GPS-IMU (eqs. 29, 30, 32, 33) and VIDEO-IMU(2) (eq. 35): position/velocity EKFs |
 //! | this file | the three filters' state, IMU stepping, GNSS fixes, alignment, divergence check |
+//! | [`gnss_tilt`] | our addition: roll/pitch from the GNSS acceleration while no video chain runs |
 //! | `video` | egomotion in: eq. (34), eq. (D1) while GNSS is fused, eq. (35) in outages |
 //! | `report` | motion prior, health and the pose output with its stated σ |
 //!
@@ -27,9 +28,16 @@
 //!   compared with the direction of the GNSS-IMU velocity (eq. D1, [`attitude`]), which observes
 //!   heading and pitch whatever the lever arm. During outages the direction goes to VIDEO-IMU(2).
 //!
-//! The un-modelled gyro bias is covered by extra process noise.
+//! - Beyond the paper (our addition, `EstimatorParams::paper_gnss_tilt`): while no video
+//!   pseudo-attitude chain runs, roll and pitch are fused from the GNSS acceleration against the
+//!   accelerometers over windows of about a second ([`gnss_tilt`]); the alignment then takes only
+//!   the course from GNSS.
+//!
+//! The un-modelled gyro bias is covered by extra process noise (with `paper_gnss_tilt`, a bias
+//! learnt from the windows' corrections is also taken off the gyro).
 
 pub mod attitude;
+pub mod gnss_tilt;
 pub mod posvel;
 mod report;
 mod video;
@@ -119,6 +127,8 @@ pub struct PaperFilter {
     tilt_disagree: u32,
     /// Restarts after a detected divergence (kept across them).
     divergence_resets: u32,
+    /// Roll and pitch from the GNSS acceleration (`gnss_tilt`, our addition).
+    gnss_tilt: gnss_tilt::GnssTilt,
 }
 
 /// Roll or pitch this far from the accelerometer's tilt (with the GNSS acceleration removed) for
@@ -187,6 +197,7 @@ impl PaperFilter {
             course_heading: false,
             tilt_disagree: 0,
             divergence_resets: 0,
+            gnss_tilt: gnss_tilt::GnssTilt::default(),
         };
         s.course_heading =
             s.params.course_heading || config.airframe == uavnav_core::Airframe::FixedWing;
@@ -222,6 +233,7 @@ impl PaperFilter {
         fresh.tilt_disagree = 0;
         fresh.divergence_resets = 0;
         fresh.observed_psd = (0.0, 0.0);
+        fresh.gnss_tilt = gnss_tilt::GnssTilt::default();
         *self = fresh;
         if let Some(o) = cfg_frame {
             self.set_frame(o);
@@ -271,7 +283,7 @@ impl PaperFilter {
             self.accel_psd,
         );
         att.predict(
-            &m.gyro,
+            &(m.gyro - self.gnss_tilt.gyro_bias_radps()),
             &self.w_ie,
             dt_s,
             gyro_psd + self.params.paper_gyro_instability_psd,
@@ -285,6 +297,7 @@ impl PaperFilter {
             .at(&frame, &gi.x);
         let q_acc = accel_psd + m.accel.norm_squared() * att_var;
         gi.predict(&c, &m.accel, &g, &self.w_ie, dt_s, q_acc);
+        self.gnss_tilt.add_imu(&c, &m.accel, accel_psd, dt_s);
         self.vel_hist.push_back((s.t_ns, gi.v));
         while self
             .vel_hist
@@ -391,11 +404,20 @@ impl PaperFilter {
                 let w_nb = gyro - att.rotation().transpose() * self.w_ie;
                 let v_body = meas_vel - att.rotation() * w_nb.cross(&self.lever_b);
                 let course_sigma = course_sigma_rad(meas.sigma_vel_mps, &v_body);
+                // With `paper_gnss_tilt`, roll and pitch come from its windows (honest about the
+                // GNSS acceleration's noise, which over one fix interval is several degrees on
+                // real receivers); the alignment keeps the course.
+                let tilt_sigma = if self.params.paper_gnss_tilt {
+                    None
+                } else {
+                    Some(GNSS_TILT_SIGMA_RAD)
+                };
                 gnss_attitude_aiding(
                     att,
                     &f_mean,
                     &(g - a_n),
                     &v_body,
+                    tilt_sigma,
                     course_sigma,
                     if self.course_heading {
                         self.params.init_min_speed_mps
@@ -412,6 +434,17 @@ impl PaperFilter {
         };
         let w_nb = gyro - att.rotation().transpose() * self.w_ie;
         let gate = self.params.gate_sigma;
+        if self.params.paper_gnss_tilt {
+            let fix = gnss_tilt::TiltFix {
+                t_ns: meas.t_ns,
+                vel_ned_mps: meas_vel - att.rotation() * w_nb.cross(&self.lever_b),
+                sigma_vel_mps: meas.sigma_vel_mps,
+                g_ned: g,
+                w_ie: self.w_ie,
+            };
+            let video = att.video_active();
+            self.gnss_tilt.at_fix(&fix, att, video, gate);
+        }
         gi.update_gnss(
             &meas,
             att,
@@ -513,12 +546,18 @@ fn gnss_attitude_aiding(
     f_b: &Vector3<f64>,
     g_app_n: &Vector3<f64>,
     vel_n: &Vector3<f64>,
+    tilt_sigma: Option<f64>,
     course_sigma: f64,
     min_speed: f64,
     gate: f64,
     diag: &mut crate::aid_sources::InnovDiag,
 ) {
     let moving = vel_n.xy().norm() >= min_speed;
+    if tilt_sigma.is_none() && !moving {
+        return;
+    }
+    // Not measured: a σ that leaves the angle to the filter.
+    let tilt_sigma = tilt_sigma.unwrap_or(1e3);
     let yaw = if moving {
         vel_n.y.atan2(vel_n.x)
     } else {
@@ -534,7 +573,7 @@ fn gnss_attitude_aiding(
         y
     };
     let course_sigma = if moving { course_sigma } else { 1e3 };
-    let sig = Vector3::new(GNSS_TILT_SIGMA_RAD, GNSS_TILT_SIGMA_RAD, course_sigma);
+    let sig = Vector3::new(tilt_sigma, tilt_sigma, course_sigma);
     att.update_euler(&Vector3::new(r, p, y), &sig, gate, att.t_ns, diag);
 }
 
