@@ -22,6 +22,7 @@
 //!   `stop_at_damage` and a note says where it stopped.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
+use uavnav_core::ImuSample;
 use uavnav_logs::{FlightLog, ImportOptions, LogKind, TimeBase, VehicleKind};
 
 /// Rows of a CSV file as numbers (empty cells NaN); the header line is skipped.
@@ -117,13 +118,33 @@ fn check_flight(root: &std::path::Path, name: &str) {
     let t_end = json_f64(&conv, "t_end_s").map_or(i64::MAX, |s| t0 + (s * 1e9).round() as i64);
     let delay_ns = (log.gnss_delay_s * 1e9).round() as i64;
 
-    // IMU
+    // IMU: the ASL keeps the board frame the autopilot logs in; the import rotates it into the
+    // vehicle frame by AHRS_TRIM_X/Y (103: roll 0.68°, pitch −0.22°; plane_E: −0.63°, −1.17°;
+    // 218: pitch −0.06°), so it is rotated back to compare.
+    let trim = uavnav_logs::ardupilot_vehicle_from_board(
+        log.params.get("AHRS_TRIM_X").copied(),
+        log.params.get("AHRS_TRIM_Y").copied(),
+    )
+    .expect("every shared flight has a trim");
+    let board_from_vehicle = trim.inverse();
+    if let Some(m) = log.config.mag {
+        assert!(
+            m.body_from_mag
+                .angle_to(&nalgebra::UnitQuaternion::from_rotation_matrix(&trim))
+                < 1e-12
+        );
+    }
     let p = asl.join("imu0/data.csv");
     let (want, want_t) = (csv(&p), stamps(&p));
     let imu: Vec<_> = log.imu.iter().filter(|s| s.t_ns <= t_end).collect();
     assert_eq!(imu.len(), want.len(), "{name} IMU count");
     for ((s, w), wt) in imu.iter().zip(&want).zip(&want_t) {
         assert_eq!(s.t_ns + shift, *wt, "{name} IMU stamp");
+        let s = ImuSample {
+            t_ns: s.t_ns,
+            gyro_radps: board_from_vehicle * s.gyro_radps,
+            accel_mps2: board_from_vehicle * s.accel_mps2,
+        };
         let got = [
             s.gyro_radps.x,
             s.gyro_radps.y,

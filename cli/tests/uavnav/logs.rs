@@ -83,6 +83,17 @@ fn convert_ardupilot_log_matches_the_shared_asl_folder() {
         "{text}"
     );
     let ours = asl.join("mav0");
+    // The shared folder keeps the board frame the autopilot logs in and records AHRS_TRIM_X/Y in
+    // its conversion.json; ours is in the vehicle frame (218: a pitch trim of −0.06°), so our IMU
+    // is rotated back to compare, and our compass's T_BS is that rotation.
+    let trim = uavnav_dataset::asl::conversion::vehicle_from_board(&root.join("erle_copter_218"))
+        .expect("conversion.json")
+        .expect("a trim");
+    let mag_yaml = std::fs::read_to_string(ours.join("mag0/sensor.yaml")).expect("yaml");
+    assert!(
+        mag_yaml.contains("data: [0.999999403953594, 0.0, -0.00109182986624"),
+        "{mag_yaml}"
+    );
     for folder in [
         "imu0",
         "gnss0",
@@ -101,6 +112,12 @@ fn convert_ardupilot_log_matches_the_shared_asl_folder() {
             let shift = if folder == "gnss0" { 220_000_000 } else { 0 };
             assert_eq!(stamp(x) - shift, stamp(y), "{folder} stamp");
             let (mut u, v) = (values(x), values(y));
+            if folder == "imu0" {
+                let board = trim.inverse();
+                let w = board * nalgebra::Vector3::new(u[0], u[1], u[2]);
+                let a = board * nalgebra::Vector3::new(u[3], u[4], u[5]);
+                u[..6].copy_from_slice(&[w.x, w.y, w.z, a.x, a.y, a.z]);
+            }
             if folder == "state_groundtruth_estimate0" && u[3] * v[3] < 0.0 {
                 // q and −q are the same rotation (the converters' Euler formulas differ in sign)
                 u[3..7].iter_mut().for_each(|c| *c = -*c);

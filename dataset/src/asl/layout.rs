@@ -9,6 +9,9 @@
 //! <root>/mav0/state_groundtruth_estimate0/data.csv, sensor.yaml (origin)   optional truth
 //! <root>/mav0/body.yaml                           optional uavnav extras (vehicle_id,
 //!                                                 terrain_elevation_m, filter_profile)
+//! <root>/conversion.json                          optional record of a flight-log conversion:
+//!                                                 an ArduPilot trim in it rotates the IMU
+//!                                                 (see `super::conversion`)
 //! ```
 
 /// The sensor folder names.

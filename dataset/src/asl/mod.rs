@@ -1,5 +1,6 @@
 //! The ASL/EuRoC folder format extended with `gnss0` (layout in [`layout`]).
 
+pub mod conversion;
 pub mod layout;
 pub mod reader;
 pub mod sensor_yaml;

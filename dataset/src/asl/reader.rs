@@ -36,6 +36,8 @@ pub struct AslDataset {
     truth: Option<Vec<TruthSample>>,
     reference: Option<crate::Reference>,
     missing_images: MissingImages,
+    /// The rotation the IMU samples are read through (`conversion.json`'s ArduPilot trim).
+    vehicle_from_board: Option<nalgebra::Rotation3<f64>>,
 }
 
 /// The default vehicle id of an ASL folder without `body.yaml`.
@@ -60,9 +62,16 @@ impl AslDataset {
         let gnss = sensor_dir(&mav, GNSS)
             .map(|d| sensor_yaml::read_gnss(&d.join(SENSOR_YAML)))
             .transpose()?;
-        let mag = sensor_dir(&mav, MAG)
+        let mut mag = sensor_dir(&mav, MAG)
             .map(|d| sensor_yaml::read_mag(&d.join(SENSOR_YAML)))
             .transpose()?;
+        let vehicle_from_board = match mav.parent() {
+            Some(root) => super::conversion::vehicle_from_board(root)?,
+            None => None,
+        };
+        if let (Some(r), Some(m)) = (vehicle_from_board, mag.as_mut()) {
+            m.body_from_mag = UnitQuaternion::from_rotation_matrix(&r) * m.body_from_mag;
+        }
         let baro = sensor_dir(&mav, BARO)
             .map(|d| sensor_yaml::read_baro(&d.join(SENSOR_YAML)))
             .transpose()?;
@@ -104,7 +113,15 @@ impl AslDataset {
             truth,
             reference,
             missing_images,
+            vehicle_from_board,
         })
+    }
+
+    /// The rotation from the board frame the IMU was logged in into the vehicle frame, when the
+    /// folder's `conversion.json` states an ArduPilot trim (see [`super::conversion`]): the IMU
+    /// samples are read through it and the compass's `body_from_mag` includes it.
+    pub fn vehicle_from_board(&self) -> Option<nalgebra::Rotation3<f64>> {
+        self.vehicle_from_board
     }
 
     /// The `mav0` folder.
@@ -142,6 +159,7 @@ impl AslDataset {
     pub(crate) fn sources(&self, skipped: Arc<AtomicUsize>) -> Result<Vec<Box<dyn EventSource>>> {
         let mut out: Vec<Box<dyn EventSource>> = vec![Box::new(ImuSource::open(
             &self.mav.join(IMU).join(DATA_CSV),
+            self.vehicle_from_board,
         )?)];
         if self.config.gnss.is_some() {
             out.push(Box::new(RowSource::open(
@@ -229,13 +247,16 @@ fn unit_quaternion(path: &Path, line: usize, q: [f64; 4]) -> Result<UnitQuaterni
 struct ImuSource {
     csv: CsvReader,
     order: Monotonic,
+    /// Applied to every sample (see [`AslDataset::vehicle_from_board`]).
+    rotation: Option<nalgebra::Rotation3<f64>>,
 }
 
 impl ImuSource {
-    fn open(path: &Path) -> Result<Self> {
+    fn open(path: &Path, rotation: Option<nalgebra::Rotation3<f64>>) -> Result<Self> {
         Ok(ImuSource {
             csv: CsvReader::open(path, IMU_COLUMNS)?,
             order: Monotonic::default(),
+            rotation,
         })
     }
 }
@@ -250,10 +271,15 @@ impl EventSource for ImuSource {
             let t_ns = row.i64(0)?;
             let w: [f64; 3] = row.f64s(1)?;
             let a: [f64; 3] = row.f64s(4)?;
+            let (w, a) = (Vector3::from(w), Vector3::from(a));
+            let (gyro_radps, accel_mps2) = match self.rotation {
+                Some(r) => (r * w, r * a),
+                None => (w, a),
+            };
             Ok(SensorEvent::Imu(ImuSample {
                 t_ns,
-                gyro_radps: Vector3::from(w),
-                accel_mps2: Vector3::from(a),
+                gyro_radps,
+                accel_mps2,
             }))
         };
         let line = row.line();

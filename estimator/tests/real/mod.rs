@@ -91,7 +91,7 @@ impl RealFlight {
         });
         config.camera = None;
         let imu_t = stamp(&m.join("imu0/data.csv"));
-        let imu = rows(&m.join("imu0/data.csv"))
+        let imu: Vec<ImuSample> = rows(&m.join("imu0/data.csv"))
             .into_iter()
             .zip(imu_t)
             .filter_map(|(r, t)| {
@@ -178,6 +178,18 @@ impl RealFlight {
                 })
             })
             .collect();
+        let mut imu = imu;
+        // As `uavnav_dataset::asl::conversion` reads it: an ArduPilot conversion keeps the board
+        // frame; the autopilot's attitude (the reference) is the vehicle frame's.
+        if let Some(r) = vehicle_from_board(dir) {
+            for s in &mut imu {
+                s.gyro_radps = r * s.gyro_radps;
+                s.accel_mps2 = r * s.accel_mps2;
+            }
+            if let Some(m) = config.mag.as_mut() {
+                m.body_from_mag = UnitQuaternion::from_rotation_matrix(&r) * m.body_from_mag;
+            }
+        }
         Self {
             config,
             imu,
@@ -187,6 +199,14 @@ impl RealFlight {
             reference,
         }
     }
+}
+
+/// `conversion.json`'s ArduPilot trim as `vehicle_from_board` (`None` without it).
+fn vehicle_from_board(dir: &Path) -> Option<nalgebra::Rotation3<f64>> {
+    let text = std::fs::read_to_string(dir.join("conversion.json")).ok()?;
+    let json: serde_json::Value = serde_json::from_str(&text).ok()?;
+    let trim = |k: &str| json.get("params")?.get(k)?.as_f64();
+    uavnav_logs::ardupilot_vehicle_from_board(trim("AHRS_TRIM_X"), trim("AHRS_TRIM_Y"))
 }
 
 /// Which sensors a run uses.
