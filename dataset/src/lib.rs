@@ -255,11 +255,13 @@ impl Dataset {
         }
     }
 
-    /// What the reader dropped or assumed (a flight log's import notes); empty otherwise.
+    /// What the reader dropped or assumed (a flight log's import notes, an ASL folder's trim from
+    /// its `conversion.json`); empty otherwise.
     pub fn notes(&self) -> &[String] {
         match &self.inner {
             Inner::Log(d) => d.notes(),
-            _ => &[],
+            Inner::Asl(d) => d.notes(),
+            Inner::Mcap(_) => &[],
         }
     }
 

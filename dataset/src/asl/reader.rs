@@ -38,6 +38,8 @@ pub struct AslDataset {
     missing_images: MissingImages,
     /// The rotation the IMU samples are read through (`conversion.json`'s ArduPilot trim).
     vehicle_from_board: Option<nalgebra::Rotation3<f64>>,
+    /// What the reader assumed (the trim it applied).
+    notes: Vec<String>,
 }
 
 /// The default vehicle id of an ASL folder without `body.yaml`.
@@ -114,7 +116,23 @@ impl AslDataset {
             reference,
             missing_images,
             vehicle_from_board,
+            notes: vehicle_from_board
+                .map(|r| {
+                    let (roll, pitch, _) = r.euler_angles();
+                    vec![format!(
+                        "conversion.json: IMU read in the vehicle frame of AHRS_TRIM_X/Y (roll \
+                         {:.2}°, pitch {:.2}°), the frame the autopilot reports its attitude in",
+                        roll.to_degrees(),
+                        pitch.to_degrees()
+                    )]
+                })
+                .unwrap_or_default(),
         })
+    }
+
+    /// What the reader assumed (the ArduPilot trim it read the IMU through).
+    pub fn notes(&self) -> &[String] {
+        &self.notes
     }
 
     /// The rotation from the board frame the IMU was logged in into the vehicle frame, when the
