@@ -12,6 +12,9 @@
 //!   since boot.
 //! * Reference: `ATTITUDE` with `GLOBAL_POSITION_INT` (the autopilot's own estimate).
 //! * Vehicle type: `HEARTBEAT.type`.
+//! * Parameters: `PARAM_VALUE` (sent when the ground station read them; last value wins). From
+//!   ArduPilot, `AHRS_TRIM_X/Y` rotate the IMU into the vehicle frame `ATTITUDE` is reported in,
+//!   and are the compass's `body_from_mag`, as for a `.BIN` ([`crate::ardupilot_vehicle_from_board`]).
 //!
 //! Only the system that sent the most IMU messages is read (a tlog also holds the ground
 //! station's own heartbeats, and may hold other vehicles). Telemetry streams are slow (a ground
@@ -43,6 +46,7 @@ pub const DEFAULT_GNSS_DELAY_S: f64 = 0.22;
 const G: f64 = 9.806_65;
 const HEARTBEAT: u32 = 0;
 const SYSTEM_TIME: u32 = 2;
+const PARAM_VALUE: u32 = 22;
 const GPS_RAW_INT: u32 = 24;
 const RAW_IMU: u32 = 27;
 const SCALED_PRESSURE: u32 = 29;
@@ -56,6 +60,7 @@ fn name(id: u32) -> String {
     match id {
         HEARTBEAT => "HEARTBEAT".into(),
         SYSTEM_TIME => "SYSTEM_TIME".into(),
+        PARAM_VALUE => "PARAM_VALUE".into(),
         GPS_RAW_INT => "GPS_RAW_INT".into(),
         RAW_IMU => "RAW_IMU".into(),
         SCALED_PRESSURE => "SCALED_PRESSURE".into(),
@@ -166,7 +171,38 @@ pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, Log
         ));
         DEFAULT_GNSS_DELAY_S
     });
-    let config = crate::mems_config(&imu, 0.0, &gnss, &mag, &baro, gnss_delay_s);
+    let mut config = crate::mems_config(&imu, 0.0, &gnss, &mag, &baro, gnss_delay_s);
+    let mut params: BTreeMap<String, f64> = BTreeMap::new();
+    for f in of(PARAM_VALUE) {
+        let p = Fields(&f.payload);
+        let value = p.f32(0);
+        let id = p.text(8, 16);
+        if !id.is_empty() && value.is_finite() {
+            params.insert(id, value);
+        }
+    }
+    let mut imu = imu;
+    if ardupilot
+        && let Some(r) = crate::ardupilot_vehicle_from_board(
+            params.get("AHRS_TRIM_X").copied(),
+            params.get("AHRS_TRIM_Y").copied(),
+        )
+    {
+        for s in &mut imu {
+            s.gyro_radps = r * s.gyro_radps;
+            s.accel_mps2 = r * s.accel_mps2;
+        }
+        if let Some(m) = config.mag.as_mut() {
+            m.body_from_mag = nalgebra::UnitQuaternion::from_rotation_matrix(&r) * m.body_from_mag;
+        }
+        let (roll, pitch, _) = r.euler_angles();
+        notes.push(format!(
+            "IMU rotated into the vehicle frame by AHRS_TRIM_X/Y (roll {:.2}°, pitch {:.2}°), \
+             the frame ATTITUDE reports; the compass by its body_from_mag",
+            roll.to_degrees(),
+            pitch.to_degrees()
+        ));
+    }
     Ok(FlightLog {
         source: LogKind::Mavlink,
         vehicle,
@@ -182,7 +218,7 @@ pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, Log
         reference,
         reference_origin,
         attitude_flown: Vec::new(),
-        params: BTreeMap::new(),
+        params,
         gnss_delay_s,
         config,
         message_counts,

@@ -53,6 +53,7 @@ pub(crate) fn crc_extra(id: u32) -> Option<(u8, usize)> {
     Some(match id {
         0 => (50, 9),    // HEARTBEAT
         2 => (137, 12),  // SYSTEM_TIME
+        22 => (220, 25), // PARAM_VALUE
         24 => (24, 52),  // GPS_RAW_INT (v2 extensions included)
         27 => (144, 29), // RAW_IMU (v2 extensions included)
         29 => (115, 16), // SCALED_PRESSURE (v2 extension included)
@@ -196,6 +197,13 @@ impl Fields<'_> {
             b.copy_from_slice(s);
         }
         b
+    }
+    /// A `char[N]` field: the bytes before the first NUL (a MAVLink 2 payload may be cut short).
+    pub(crate) fn text(&self, at: usize, n: usize) -> String {
+        let bytes = self.0.get(at..).unwrap_or_default();
+        let bytes = &bytes[..bytes.len().min(n)];
+        let end = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
+        String::from_utf8_lossy(&bytes[..end]).into_owned()
     }
     pub(crate) fn u8(&self, at: usize) -> u8 {
         self.0.get(at).copied().unwrap_or(0)

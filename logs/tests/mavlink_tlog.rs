@@ -45,6 +45,14 @@ fn tlog_counts_and_values_match_pymavlink() {
     assert!((s.accel_mps2.z + 0.999 * 9.806_65).abs() < 1e-9);
     assert!((s.gyro_radps.z + 0.231).abs() < 1e-12);
     assert!((log.mag[0].field_t.z + 541e-7).abs() < 1e-15);
+    // PARAM_VALUE: 1,147 messages, 1,053 parameters (the ground station read some twice); SITL's
+    // AHRS_EKF_TYPE 10 and no trim, so the IMU stays as sent (checked above).
+    assert_eq!(log.message_counts.get("PARAM_VALUE"), Some(&1147));
+    assert_eq!(log.params.len(), 1053);
+    assert_eq!(log.params.get("SYSID_THISMAV"), Some(&1.0));
+    assert_eq!(log.params.get("AHRS_EKF_TYPE"), Some(&10.0));
+    assert_eq!(log.params.get("AHRS_TRIM_X"), Some(&0.0));
+    assert!(!log.notes.iter().any(|n| n.contains("AHRS_TRIM")));
     // First GPS_RAW_INT: lat −35.3629847°, 1.87 m/s at course 182.82°, HDOP 1.21.
     let g = log.gnss[0];
     assert!((g.lat_deg + 35.362_984_7).abs() < 1e-9);
