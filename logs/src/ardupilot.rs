@@ -638,6 +638,28 @@ mod tests {
         assert_eq!(gps_leap_seconds(gps(2017, 1, 1) + 18), 18);
     }
 
+    /// A board rolled +3° and pitched −2° on a level airframe, with that trim: its accelerometer
+    /// reads level in the vehicle frame. No trim, or one ArduPilot would not take, is no rotation.
+    #[test]
+    fn the_trim_levels_the_board() {
+        let (roll, pitch) = (3f64.to_radians(), -2f64.to_radians());
+        let nav_from_board = nalgebra::Rotation3::from_euler_angles(roll, pitch, 0.0);
+        let f_board = nav_from_board.inverse() * Vector3::new(0.0, 0.0, -9.81);
+        let r = vehicle_from_board(Some(roll), Some(pitch)).unwrap();
+        let f_vehicle = r * f_board;
+        assert!(
+            (f_vehicle - Vector3::new(0.0, 0.0, -9.81)).norm() < 1e-12,
+            "{f_vehicle}"
+        );
+        assert!(vehicle_from_board(None, None).is_none());
+        assert!(vehicle_from_board(Some(0.0), Some(0.0)).is_none());
+        assert!(
+            vehicle_from_board(Some(0.2), Some(0.0)).is_none(),
+            "beyond 10°"
+        );
+        assert!(vehicle_from_board(Some(f64::NAN), Some(0.01)).is_none());
+    }
+
     #[test]
     fn nearest_accuracy_within_window() {
         let acc = [(1_000_000, 1.0, 2.0, 0.2), (1_200_000, 3.0, 4.0, 0.4)];
