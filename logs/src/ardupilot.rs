@@ -19,13 +19,9 @@
 //!   moved back by the reference's `PN, PE, PD` at the same stamp (`AHR2` is the EKF's output when
 //!   the EKF runs); altitude + EGM96 `N` at the origin.
 //! * **ATT**: the attitude flown, as [`crate::AttitudeSample`]s.
-//! * **Frame**: the body frame is the vehicle's as the autopilot reports it. ArduPilot's
-//!   `AHRS_TRIM_X/Y` (the board's roll and pitch on the airframe, set by its level calibration)
-//!   rotate the board frame its IMU and compass log in into the vehicle frame its attitude (`ATT`,
-//!   `EKF1`, `NKF1`, `XKF1`) is reported in ([`vehicle_from_board`]): the IMU samples are rotated,
-//!   and the compass's `body_from_mag` is that rotation (its samples stay as logged). Without it
-//!   the estimate sits a constant trim away from every autopilot reference (copter_103: 0.68° of
-//!   roll).
+//! * **Frame**: the body frame is the vehicle's as the autopilot reports it: `AHRS_TRIM_X/Y`
+//!   rotate the IMU, and the compass's `body_from_mag`, out of the board frame they are logged in
+//!   ([`crate::trim`]).
 
 use std::collections::{BTreeMap, HashSet};
 
@@ -388,25 +384,7 @@ pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, Log
         },
     };
     let mut config = config(&params, &imu, &gnss, &mag, &baro, gnss_delay_s);
-    if let Some(r) = vehicle_from_board(
-        params.get("AHRS_TRIM_X").copied(),
-        params.get("AHRS_TRIM_Y").copied(),
-    ) {
-        for s in &mut imu {
-            s.gyro_radps = r * s.gyro_radps;
-            s.accel_mps2 = r * s.accel_mps2;
-        }
-        if let Some(m) = config.mag.as_mut() {
-            m.body_from_mag = nalgebra::UnitQuaternion::from_rotation_matrix(&r) * m.body_from_mag;
-        }
-        let (roll, pitch, _) = r.euler_angles();
-        notes.push(format!(
-            "IMU rotated into the vehicle frame by AHRS_TRIM_X/Y (roll {:.2}°, pitch {:.2}°), \
-             the frame the autopilot reports its attitude in; the compass by its body_from_mag",
-            roll.to_degrees(),
-            pitch.to_degrees()
-        ));
-    }
+    crate::trim::apply(&params, &mut imu, &mut config, &mut notes);
 
     Ok(FlightLog {
         source: LogKind::ArduPilot,
@@ -457,27 +435,6 @@ fn firmware(log: &DfLog) -> (Option<String>, VehicleKind) {
         return (Some(m.to_string()), kind);
     }
     (None, VehicleKind::Unknown)
-}
-
-/// Largest trim ArduPilot accepts for `AHRS_TRIM_X/Y`, rad (10°).
-pub const MAX_TRIM_RAD: f64 = 0.1745;
-
-/// `vehicle_from_board` of ArduPilot's `AHRS_TRIM_X/Y` (rad): the rotation that takes a vector
-/// from the board frame (IMU, compass) into the vehicle frame the autopilot reports its attitude
-/// in. ArduPilot builds `R = from_euler(trim_x, trim_y, 0)` (ZYX, as `nav_from_body`) and
-/// reports `C_nav_vehicle = C_nav_board Rᵀ`, so a board vector `u` is `R u` in the vehicle frame
-/// (a board rolled +δ on the airframe, with trim δ, reads level). `None` when both are 0, absent,
-/// not finite or beyond [`MAX_TRIM_RAD`] (not a trim ArduPilot would use).
-pub fn vehicle_from_board(
-    trim_x_rad: Option<f64>,
-    trim_y_rad: Option<f64>,
-) -> Option<nalgebra::Rotation3<f64>> {
-    let (x, y) = (trim_x_rad.unwrap_or(0.0), trim_y_rad.unwrap_or(0.0));
-    let plausible = |v: f64| v.is_finite() && v.abs() <= MAX_TRIM_RAD;
-    if !plausible(x) || !plausible(y) || (x == 0.0 && y == 0.0) {
-        return None;
-    }
-    Some(nalgebra::Rotation3::from_euler_angles(x, y, 0.0))
 }
 
 /// The EKF's estimate: `XKF1`/`NKF1` core 0, else `EKF1`.
@@ -636,28 +593,6 @@ mod tests {
         // 2017-01-01T00:00:00 UTC is GPS 2017-01-01T00:00:18
         assert_eq!(gps_leap_seconds(gps(2017, 1, 1) + 17), 17);
         assert_eq!(gps_leap_seconds(gps(2017, 1, 1) + 18), 18);
-    }
-
-    /// A board rolled +3° and pitched −2° on a level airframe, with that trim: its accelerometer
-    /// reads level in the vehicle frame. No trim, or one ArduPilot would not take, is no rotation.
-    #[test]
-    fn the_trim_levels_the_board() {
-        let (roll, pitch) = (3f64.to_radians(), -2f64.to_radians());
-        let nav_from_board = nalgebra::Rotation3::from_euler_angles(roll, pitch, 0.0);
-        let f_board = nav_from_board.inverse() * Vector3::new(0.0, 0.0, -9.81);
-        let r = vehicle_from_board(Some(roll), Some(pitch)).unwrap();
-        let f_vehicle = r * f_board;
-        assert!(
-            (f_vehicle - Vector3::new(0.0, 0.0, -9.81)).norm() < 1e-12,
-            "{f_vehicle}"
-        );
-        assert!(vehicle_from_board(None, None).is_none());
-        assert!(vehicle_from_board(Some(0.0), Some(0.0)).is_none());
-        assert!(
-            vehicle_from_board(Some(0.2), Some(0.0)).is_none(),
-            "beyond 10°"
-        );
-        assert!(vehicle_from_board(Some(f64::NAN), Some(0.01)).is_none());
     }
 
     #[test]

@@ -44,13 +44,11 @@ pub mod error;
 mod mavlink;
 mod px4;
 mod tlog;
+pub mod trim;
 mod ulog;
 
 use std::collections::BTreeMap;
 
-pub use ardupilot::{
-    MAX_TRIM_RAD as ARDUPILOT_MAX_TRIM_RAD, vehicle_from_board as ardupilot_vehicle_from_board,
-};
 pub use error::LogError;
 pub use uavnav_core::{BaroSample, GnssFix, GnssVelocity, MagSample};
 use uavnav_core::{ImuSample, Lla, TruthSample, VehicleConfig};

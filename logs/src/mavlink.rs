@@ -14,7 +14,7 @@
 //! * Vehicle type: `HEARTBEAT.type`.
 //! * Parameters: `PARAM_VALUE` (sent when the ground station read them; last value wins). From
 //!   ArduPilot, `AHRS_TRIM_X/Y` rotate the IMU into the vehicle frame `ATTITUDE` is reported in,
-//!   and are the compass's `body_from_mag`, as for a `.BIN` ([`crate::ardupilot_vehicle_from_board`]).
+//!   as for a `.BIN` ([`crate::trim`]).
 //!
 //! Only the system that sent the most IMU messages is read (a tlog also holds the ground
 //! station's own heartbeats, and may hold other vehicles). Telemetry streams are slow (a ground
@@ -141,7 +141,7 @@ pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, Log
     let boot_us = |us: f64| (us as i64).saturating_mul(1000).saturating_add(offset_ns);
     let boot_ms = |ms: f64| boot_us(ms * 1e3);
 
-    let (imu, mag) = imu_and_mag(&t.frames, sys, ardupilot, &boot_us, &boot_ms, &mut notes)?;
+    let (mut imu, mag) = imu_and_mag(&t.frames, sys, ardupilot, &boot_us, &boot_ms, &mut notes)?;
     let gnss = gnss(of(GPS_RAW_INT), opts, &boot_us, &mut notes);
     let baro: Vec<BaroSample> = of(SCALED_PRESSURE)
         .map(|f| {
@@ -181,27 +181,8 @@ pub(crate) fn import(data: &[u8], opts: &ImportOptions) -> Result<FlightLog, Log
             params.insert(id, value);
         }
     }
-    let mut imu = imu;
-    if ardupilot
-        && let Some(r) = crate::ardupilot_vehicle_from_board(
-            params.get("AHRS_TRIM_X").copied(),
-            params.get("AHRS_TRIM_Y").copied(),
-        )
-    {
-        for s in &mut imu {
-            s.gyro_radps = r * s.gyro_radps;
-            s.accel_mps2 = r * s.accel_mps2;
-        }
-        if let Some(m) = config.mag.as_mut() {
-            m.body_from_mag = nalgebra::UnitQuaternion::from_rotation_matrix(&r) * m.body_from_mag;
-        }
-        let (roll, pitch, _) = r.euler_angles();
-        notes.push(format!(
-            "IMU rotated into the vehicle frame by AHRS_TRIM_X/Y (roll {:.2}°, pitch {:.2}°), \
-             the frame ATTITUDE reports; the compass by its body_from_mag",
-            roll.to_degrees(),
-            pitch.to_degrees()
-        ));
+    if ardupilot {
+        crate::trim::apply(&params, &mut imu, &mut config, &mut notes);
     }
     Ok(FlightLog {
         source: LogKind::Mavlink,

@@ -22,7 +22,6 @@
 //!   `stop_at_damage` and a note says where it stopped.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
-use uavnav_core::ImuSample;
 use uavnav_logs::{FlightLog, ImportOptions, LogKind, TimeBase, VehicleKind};
 
 /// Rows of a CSV file as numbers (empty cells NaN); the header line is skipped.
@@ -121,7 +120,7 @@ fn check_flight(root: &std::path::Path, name: &str) {
     // IMU: the ASL keeps the board frame the autopilot logs in; the import rotates it into the
     // vehicle frame by AHRS_TRIM_X/Y (103: roll 0.68°, pitch −0.22°; plane_E: −0.63°, −1.17°;
     // 218: pitch −0.06°), so it is rotated back to compare.
-    let trim = uavnav_logs::ardupilot_vehicle_from_board(
+    let trim = uavnav_logs::trim::vehicle_from_board(
         log.params.get("AHRS_TRIM_X").copied(),
         log.params.get("AHRS_TRIM_Y").copied(),
     )
@@ -140,11 +139,7 @@ fn check_flight(root: &std::path::Path, name: &str) {
     assert_eq!(imu.len(), want.len(), "{name} IMU count");
     for ((s, w), wt) in imu.iter().zip(&want).zip(&want_t) {
         assert_eq!(s.t_ns + shift, *wt, "{name} IMU stamp");
-        let s = ImuSample {
-            t_ns: s.t_ns,
-            gyro_radps: board_from_vehicle * s.gyro_radps,
-            accel_mps2: board_from_vehicle * s.accel_mps2,
-        };
+        let s = uavnav_logs::trim::rotate_imu(&board_from_vehicle, s);
         let got = [
             s.gyro_radps.x,
             s.gyro_radps.y,

@@ -4,7 +4,7 @@
 //! IMU and compass in the board frame the autopilot logs in, while the autopilot reports its
 //! attitude (and every reference taken from it) in the vehicle frame; the reader rotates the IMU
 //! into the vehicle frame and composes the compass's `body_from_mag` with the same rotation
-//! (`uavnav_logs::ardupilot_vehicle_from_board`), as `uavnav convert` does for a log it imports
+//! (`uavnav_logs::trim`), as `uavnav convert` does for a log it imports
 //! itself (it writes no `conversion.json`, so nothing is rotated twice).
 
 use std::path::Path;
@@ -44,14 +44,14 @@ pub fn vehicle_from_board(root: &Path) -> Result<Option<Rotation3<f64>>> {
     let (x, y) = (trim("AHRS_TRIM_X")?, trim("AHRS_TRIM_Y")?);
     for (key, v) in [("AHRS_TRIM_X", x), ("AHRS_TRIM_Y", y)] {
         if let Some(v) = v
-            && v.abs() > uavnav_logs::ARDUPILOT_MAX_TRIM_RAD
+            && v.abs() > uavnav_logs::trim::MAX_TRIM_RAD
         {
             return Err(unsupported(format!(
                 "params.{key}: {v} rad is beyond ArduPilot's ±10° trim"
             )));
         }
     }
-    Ok(uavnav_logs::ardupilot_vehicle_from_board(x, y))
+    Ok(uavnav_logs::trim::vehicle_from_board(x, y))
 }
 
 #[cfg(test)]

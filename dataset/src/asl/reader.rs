@@ -72,7 +72,7 @@ impl AslDataset {
             None => None,
         };
         if let (Some(r), Some(m)) = (vehicle_from_board, mag.as_mut()) {
-            m.body_from_mag = UnitQuaternion::from_rotation_matrix(&r) * m.body_from_mag;
+            uavnav_logs::trim::rotate_mag_config(&r, m);
         }
         let baro = sensor_dir(&mav, BARO)
             .map(|d| sensor_yaml::read_baro(&d.join(SENSOR_YAML)))
@@ -118,12 +118,9 @@ impl AslDataset {
             vehicle_from_board,
             notes: vehicle_from_board
                 .map(|r| {
-                    let (roll, pitch, _) = r.euler_angles();
-                    vec![format!(
-                        "conversion.json: IMU read in the vehicle frame of AHRS_TRIM_X/Y (roll \
-                         {:.2}°, pitch {:.2}°), the frame the autopilot reports its attitude in",
-                        roll.to_degrees(),
-                        pitch.to_degrees()
+                    vec![uavnav_logs::trim::note(
+                        &r,
+                        super::conversion::CONVERSION_JSON,
                     )]
                 })
                 .unwrap_or_default(),
@@ -289,15 +286,14 @@ impl EventSource for ImuSource {
             let t_ns = row.i64(0)?;
             let w: [f64; 3] = row.f64s(1)?;
             let a: [f64; 3] = row.f64s(4)?;
-            let (w, a) = (Vector3::from(w), Vector3::from(a));
-            let (gyro_radps, accel_mps2) = match self.rotation {
-                Some(r) => (r * w, r * a),
-                None => (w, a),
-            };
-            Ok(SensorEvent::Imu(ImuSample {
+            let s = ImuSample {
                 t_ns,
-                gyro_radps,
-                accel_mps2,
+                gyro_radps: Vector3::from(w),
+                accel_mps2: Vector3::from(a),
+            };
+            Ok(SensorEvent::Imu(match &self.rotation {
+                Some(r) => uavnav_logs::trim::rotate_imu(r, &s),
+                None => s,
             }))
         };
         let line = row.line();

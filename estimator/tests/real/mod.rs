@@ -183,11 +183,10 @@ impl RealFlight {
         // frame; the autopilot's attitude (the reference) is the vehicle frame's.
         if let Some(r) = vehicle_from_board(dir) {
             for s in &mut imu {
-                s.gyro_radps = r * s.gyro_radps;
-                s.accel_mps2 = r * s.accel_mps2;
+                *s = uavnav_logs::trim::rotate_imu(&r, s);
             }
             if let Some(m) = config.mag.as_mut() {
-                m.body_from_mag = UnitQuaternion::from_rotation_matrix(&r) * m.body_from_mag;
+                uavnav_logs::trim::rotate_mag_config(&r, m);
             }
         }
         Self {
@@ -206,7 +205,7 @@ fn vehicle_from_board(dir: &Path) -> Option<nalgebra::Rotation3<f64>> {
     let text = std::fs::read_to_string(dir.join("conversion.json")).ok()?;
     let json: serde_json::Value = serde_json::from_str(&text).ok()?;
     let trim = |k: &str| json.get("params")?.get(k)?.as_f64();
-    uavnav_logs::ardupilot_vehicle_from_board(trim("AHRS_TRIM_X"), trim("AHRS_TRIM_Y"))
+    uavnav_logs::trim::vehicle_from_board(trim("AHRS_TRIM_X"), trim("AHRS_TRIM_Y"))
 }
 
 /// Which sensors a run uses.
