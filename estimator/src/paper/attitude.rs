@@ -202,22 +202,48 @@ impl AttitudeEkf {
         true
     }
 
-    /// Fuses an Euler-angle measurement `z` (1-σ `sigma`, independent of the filter) whose
-    /// innovation is taken against the attitude at `t_ns` and applied now.
+    /// Fuses the measured angles of an Euler-angle measurement `z` (1-σ `sigma` per angle, `None`
+    /// where the angle is not measured; independent of the filter) whose innovation is taken
+    /// against the attitude at `t_ns` and applied now. Only the measured angles enter the
+    /// update and its gate (a σ standing in for "not measured" would loosen the gate by its
+    /// degrees of freedom).
     pub fn update_euler(
         &mut self,
         z: &Vector3<f64>,
-        sigma: &Vector3<f64>,
+        sigma: [Option<f64>; 3],
         gate: f64,
         t_ns: i64,
         diag: &mut InnovDiag,
     ) {
         let pred = self.euler_at(t_ns).unwrap_or(self.euler);
         let y = wrap3(z - pred);
-        let mut h = SMatrix::<f64, 3, 6>::zeros();
-        h.fixed_view_mut::<3, 3>(0, 0).fill_with_identity();
-        let r = Matrix3::from_diagonal(&sigma.component_mul(sigma));
-        self.update(&y, &h, &r, gate, t_ns, diag);
+        let axes: Vec<(usize, f64)> = (0..3).filter_map(|k| sigma[k].map(|s| (k, s))).collect();
+        match axes.as_slice() {
+            [a] => self.update_axes::<1>(&y, &[*a], gate, t_ns, diag),
+            [a, b] => self.update_axes::<2>(&y, &[*a, *b], gate, t_ns, diag),
+            [a, b, c] => self.update_axes::<3>(&y, &[*a, *b, *c], gate, t_ns, diag),
+            _ => {}
+        }
+    }
+
+    /// [`Self::update_euler`] on `D` chosen `(angle, σ)`.
+    fn update_axes<const D: usize>(
+        &mut self,
+        y: &Vector3<f64>,
+        axes: &[(usize, f64); D],
+        gate: f64,
+        t_ns: i64,
+        diag: &mut InnovDiag,
+    ) {
+        let mut yd = SVector::<f64, D>::zeros();
+        let mut h = SMatrix::<f64, D, 6>::zeros();
+        let mut r = SMatrix::<f64, D, D>::zeros();
+        for (i, &(k, s)) in axes.iter().enumerate() {
+            yd[i] = y[k];
+            h[(i, k)] = 1.0;
+            r[(i, i)] = s * s;
+        }
+        self.update(&yd, &h, &r, gate, t_ns, diag);
     }
 
     /// Gated update of the GNSS-acceleration tilt measurement (eq. T1 of `gnss_tilt`): residual
@@ -508,7 +534,7 @@ mod tests {
         let before = att.euler_at(5 * dt_ns - 1);
         let z = att.euler + Vector3::new(0.0, 0.0, 0.01);
         let mut diag = InnovDiag::new();
-        att.update_euler(&z, &Vector3::repeat(0.001), 3.29, 10 * dt_ns, &mut diag);
+        att.update_euler(&z, [Some(0.001); 3], 3.29, 10 * dt_ns, &mut diag);
         assert_eq!(diag.fused, 1);
         // No gyro rate: every entry from the measurement time on equals the corrected attitude,
         // the entries before it are untouched.

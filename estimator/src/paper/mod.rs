@@ -553,11 +553,6 @@ fn gnss_attitude_aiding(
     diag: &mut crate::aid_sources::InnovDiag,
 ) {
     let moving = vel_n.xy().norm() >= min_speed;
-    if tilt_sigma.is_none() && !moving {
-        return;
-    }
-    // Not measured: a σ that leaves the angle to the filter.
-    let tilt_sigma = tilt_sigma.unwrap_or(1e3);
     let yaw = if moving {
         vel_n.y.atan2(vel_n.x)
     } else {
@@ -572,9 +567,14 @@ fn gnss_attitude_aiding(
     } else {
         y
     };
-    let course_sigma = if moving { course_sigma } else { 1e3 };
-    let sig = Vector3::new(tilt_sigma, tilt_sigma, course_sigma);
-    att.update_euler(&Vector3::new(r, p, y), &sig, gate, att.t_ns, diag);
+    let course_sigma = moving.then_some(course_sigma);
+    att.update_euler(
+        &Vector3::new(r, p, y),
+        [tilt_sigma, tilt_sigma, course_sigma],
+        gate,
+        att.t_ns,
+        diag,
+    );
 }
 
 /// 1-σ of the course pseudo-measurement, rad: the velocity noise across the track over the
