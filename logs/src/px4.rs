@@ -1,6 +1,9 @@
 //! PX4 ULog topics → [`FlightLog`].
 //!
 //! * **IMU**: `sensor_combined` `gyro_rad[3]`, `accelerometer_m_s2[3]` (FRD) at `timestamp`.
+//!   PX4 writes it after its board rotation (`SENS_BOARD_ROT` and the level offsets
+//!   `SENS_BOARD_X/Y/Z_OFF`), so it is already in the vehicle frame its attitude refers to: no
+//!   trim to apply, unlike ArduPilot's `AHRS_TRIM` ([`crate::trim`]).
 //! * **GNSS**: `vehicle_gps_position` or `sensor_gps`, old layout (`lat`/`lon` 1e-7°, `alt`/
 //!   `alt_ellipsoid` mm) or new (`latitude_deg`, `altitude_msl_m`, `altitude_ellipsoid_m`), fixes
 //!   with `fix_type` ≥ 3 and enough satellites; altitude: the ellipsoidal one when given, else MSL

@@ -13,11 +13,12 @@
 //!       + workers × decode_per_pixel × max_camera_pixels               (vision jobs)
 //!     + record.queue_bytes                                             (recorder, when on)
 //!     + grpc.arrival_bytes                                            (gRPC messages arriving)
-//!     + grpc.max_connections × (connection_window
-//!                               + max_streams_per_connection × grpc_stream)   (gRPC connections)
+//!     + grpc.max_connections × connection_window                      (gRPC connections)
+//!     + min(grpc.max_connections × max_streams_per_connection,
+//!           grpc.max_streams) × grpc_stream                                 (gRPC streams)
 //!     + pose_ring × (batch + max_batch_poses × pose) + health_ring × health   (output rings)
 //!     + http.max_connections × http_connection
-//!     + zenoh_links × zenoh_link                                       (Zenoh, when on)
+//!     + zenoh.max_sessions × zenoh_link                                (Zenoh, when on)
 //! ```
 //!
 //! The per-item constants below were measured on this service (release build, x86-64, mimalloc)
@@ -80,9 +81,6 @@ pub fn output_ring_bytes() -> u64 {
         std::mem::size_of::<PoseBatch>() + MAX_BATCH_POSES * std::mem::size_of::<Pose>() + 2 * 64;
     (POSE_CAPACITY * pose_slot) as u64 + HEALTH_CAPACITY as u64 * HEALTH_REPORT_BYTES
 }
-
-/// Zenoh transports the session accepts (its `transport/unicast/max_sessions` default).
-pub const ZENOH_LINKS: u64 = 1000;
 
 /// One Zenoh link's transmission and reception buffers (its batch size, 64 KiB, times the
 /// priority queues' batches, both ways).
@@ -156,10 +154,16 @@ impl MemoryBudget {
             },
             Term {
                 what: "gRPC connections",
-                bound_by: "grpc.max_connections, grpc.max_streams_per_connection",
-                bytes: u(g.max_connections)
-                    * (u64::from(GRPC_CONNECTION_WINDOW)
-                        + u64::from(g.max_streams_per_connection) * GRPC_STREAM_BYTES),
+                bound_by: "grpc.max_connections",
+                bytes: u(g.max_connections) * u64::from(GRPC_CONNECTION_WINDOW),
+            },
+            Term {
+                what: "gRPC streams",
+                bound_by: "grpc.max_streams, grpc.max_connections, grpc.max_streams_per_connection",
+                // Every stream holds a slot of `grpc.max_streams` (transport::stream_limit).
+                bytes: (u(g.max_connections) * u64::from(g.max_streams_per_connection))
+                    .min(u(g.max_streams))
+                    * GRPC_STREAM_BYTES,
             },
             Term {
                 what: "output rings",
@@ -182,8 +186,8 @@ impl MemoryBudget {
         if config.zenoh.enabled {
             terms.push(Term {
                 what: "Zenoh links",
-                bound_by: "constant (Zenoh's max_sessions)",
-                bytes: ZENOH_LINKS * ZENOH_LINK_BYTES,
+                bound_by: "zenoh.max_sessions",
+                bytes: config.zenoh.max_sessions as u64 * ZENOH_LINK_BYTES,
             });
         }
         Self { terms }
@@ -245,10 +249,19 @@ mod tests {
         assert!(with_zenoh.terms.iter().any(|t| t.what == "Zenoh links"));
         c.grpc.arrival_bytes /= 2;
         assert!(MemoryBudget::of(&c).total() < with_zenoh.total());
-        c.grpc.max_streams_per_connection /= 2;
+        let before_streams = MemoryBudget::of(&c).total();
+        c.grpc.max_streams /= 2;
         let fewer_streams = MemoryBudget::of(&c).total();
+        assert!(fewer_streams < before_streams);
         c.grpc.max_connections /= 2;
         assert!(MemoryBudget::of(&c).total() < fewer_streams);
+        // Per-connection streams count once the product is below the fleet-wide limit.
+        c.grpc.max_streams_per_connection = 1;
+        assert!(MemoryBudget::of(&c).total() < fewer_streams);
+        c.zenoh.max_sessions /= 2;
+        let fewer_links = MemoryBudget::of(&c).total();
+        c.zenoh.max_sessions *= 2;
+        assert!(fewer_links < MemoryBudget::of(&c).total());
         assert!(with_zenoh.to_string().contains("worst case in all"));
     }
 }

@@ -176,6 +176,12 @@ pub struct GrpcConfig {
     pub keepalive_timeout_s: f64,
     /// Streams one connection may have open at once (HTTP/2 `max_concurrent_streams`).
     pub max_streams_per_connection: u32,
+    /// Streams open at once on all connections together; beyond, a new call is answered at
+    /// once with RESOURCE_EXHAUSTED and counted (`uavnav_grpc_streams_refused_total`). Each open
+    /// stream holds up to `budget::GRPC_STREAM_BYTES` (288 KiB) whatever it carries, so this,
+    /// not `max_connections × max_streams_per_connection`, bounds the streams' memory
+    /// ([`crate::transport::stream_limit`]). At least 1.
+    pub max_streams: usize,
     /// Bytes all streams' arriving messages may hold together (receive buffers and decoded
     /// copies: twice a message's length, plus `2 × max_message_bytes` for a compressed one). A
     /// message that does not fit ends its stream with RESOURCE_EXHAUSTED
@@ -195,6 +201,7 @@ impl Default for GrpcConfig {
             keepalive_interval_s: 20.0,
             keepalive_timeout_s: 20.0,
             max_streams_per_connection: 32,
+            max_streams: 4096,
             arrival_bytes: 1 << 30,
         }
     }
@@ -240,7 +247,7 @@ pub struct ZenohConfig {
     /// Endpoints to connect to.
     pub connect: Vec<String>,
     /// A Zenoh JSON5 config file used as the base; `mode`, `listen`, `connect`,
-    /// `multicast_scouting` and `stalled_link_ms` are applied on top.
+    /// `multicast_scouting`, `stalled_link_ms` and `max_sessions` are applied on top.
     pub config_file: Option<PathBuf>,
     /// Multicast scouting (discovering peers on the LAN). Tests turn it off.
     pub multicast_scouting: bool,
@@ -258,6 +265,12 @@ pub struct ZenohConfig {
     /// there from its liveliness token; this bounds what an idle fleet's reminders cost however
     /// many vehicles it has. 0 publishes no repeats.
     pub repeat_health_per_s: f64,
+    /// Zenoh transports (peers, clients, routers linked to this session) open at once; beyond,
+    /// Zenoh refuses new ones (its `transport/unicast/max_sessions`). Each link holds up to
+    /// `budget::ZENOH_LINK_BYTES` (4 MiB) of buffers and one file descriptor, so this bounds
+    /// both in the memory budget and the descriptor check. A fleet's drones link to the
+    /// session through a router, or a few each; Zenoh's own default is 1,000.
+    pub max_sessions: usize,
 }
 
 impl Default for ZenohConfig {
@@ -272,6 +285,7 @@ impl Default for ZenohConfig {
             instance: String::new(),
             stalled_link_ms: 50.0,
             repeat_health_per_s: 100.0,
+            max_sessions: 256,
         }
     }
 }
@@ -663,9 +677,10 @@ impl Config {
         if g.max_connections == 0
             || self.http.max_connections == 0
             || g.max_streams_per_connection == 0
+            || g.max_streams == 0
         {
             return bad(
-                "grpc.max_connections, grpc.max_streams_per_connection and http.max_connections must be > 0",
+                "grpc.max_connections, grpc.max_streams_per_connection, grpc.max_streams and http.max_connections must be > 0",
             );
         }
         if !(seconds(g.idle_timeout_s)
@@ -730,6 +745,9 @@ impl Config {
         }
         if !(self.zenoh.repeat_health_per_s >= 0.0 && self.zenoh.repeat_health_per_s <= 1e6) {
             return bad("zenoh.repeat_health_per_s must be in [0, 1e6]");
+        }
+        if !(1..=100_000).contains(&self.zenoh.max_sessions) {
+            return bad("zenoh.max_sessions must be in [1, 100000]");
         }
         if self.health.period_ms == 0 {
             return bad("health.period_ms must be > 0");

@@ -289,6 +289,8 @@ pub struct Metrics {
     pub connections: crate::transport::conn::ConnectionMetrics,
     /// The gRPC arrival budget: bytes held, streams refused.
     pub arrivals: crate::transport::arrivals::ArrivalMetrics,
+    /// The gRPC stream limit: streams open, calls refused.
+    pub streams: crate::transport::stream_limit::StreamMetrics,
 }
 
 impl Metrics {
@@ -458,6 +460,7 @@ impl Metrics {
         let security = crate::security::SecurityMetrics::register(&mut registry);
         let connections = crate::transport::conn::ConnectionMetrics::register(&mut registry);
         let arrivals = crate::transport::arrivals::ArrivalMetrics::register(&mut registry);
+        let streams = crate::transport::stream_limit::StreamMetrics::register(&mut registry);
         let imu_clipped = Counter::default();
         registry.register(
             "imu_clipped",
@@ -504,6 +507,7 @@ impl Metrics {
             security,
             connections,
             arrivals,
+            streams,
             admission_evictions,
         }
     }

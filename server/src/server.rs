@@ -27,6 +27,7 @@ use crate::transport::arrivals::{ArrivalBudget, ArrivalLayer};
 use crate::transport::conn::{self, ConnLimits, ListenerKind, TlsSide};
 use crate::transport::grpc::{UavNavService, remap_transport_status};
 use crate::transport::grpc_serve::{self, Http2Settings};
+use crate::transport::stream_limit::{StreamLimit, StreamLimitLayer};
 use crate::transport::http::{HttpState, router};
 use crate::transport::zenoh::ZenohIo;
 use crate::vehicle::actor::{Ctx, Msg};
@@ -268,6 +269,10 @@ async fn serve_grpc(
         max as u64,
         service.metrics().arrivals.clone(),
     ));
+    let streams = Arc::new(StreamLimit::new(
+        config.grpc.max_streams,
+        service.metrics().streams.clone(),
+    ));
     let uavnav = UavNavServer::new(UavNavService::new(service, config.grpc.ack_buffer))
         .max_decoding_message_size(max)
         .max_encoding_message_size(max)
@@ -310,6 +315,7 @@ async fn serve_grpc(
         .layer(axum::middleware::map_response(
             remap_transport_status::<tonic::body::Body>,
         ))
+        .layer(StreamLimitLayer::new(streams))
         .layer(ArrivalLayer::new(arrivals))
         .service(routes.routes().prepare());
     let settings = Http2Settings {

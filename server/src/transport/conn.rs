@@ -45,9 +45,6 @@ pub const LOG_EVERY: Duration = Duration::from_secs(10);
 /// File descriptors kept for everything that is not a listener's connection: the listeners,
 /// the runtime's epoll and wakers, recording files, the Foxglove live view, the vision pool.
 pub const RESERVED_FDS: u64 = 256;
-/// Descriptors for Zenoh's links: one per session, at most Zenoh's
-/// `transport/unicast/max_sessions` (default 1000).
-pub const ZENOH_FDS: u64 = 1000;
 
 /// Which listener a connection came in on (the `listener` label).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -482,8 +479,8 @@ pub fn fd_budget(needed: u64) -> Result<FdBudget, String> {
     if hard < needed {
         return Err(format!(
             "file-descriptor budget: the configuration may need {needed} open files \
-             (grpc.max_connections + http.max_connections + {ZENOH_FDS} for Zenoh when enabled \
-             + {RESERVED_FDS} reserved) but the hard limit is {hard} (soft {soft}); raise it \
+             (grpc.max_connections + http.max_connections + zenoh.max_sessions when Zenoh is \
+             enabled + {RESERVED_FDS} reserved) but the hard limit is {hard} (soft {soft}); raise it \
              (`ulimit -Hn`, LimitNOFILE=, docker --ulimit nofile=) or lower the connection limits"
         ));
     }
@@ -503,6 +500,11 @@ pub fn fd_budget(needed: u64) -> Result<FdBudget, String> {
 
 /// The descriptors a configuration may need: every listener's limit, Zenoh's links, the reserve.
 pub fn fds_needed(config: &crate::Config) -> u64 {
-    let zenoh = if config.zenoh.enabled { ZENOH_FDS } else { 0 };
+    // Zenoh's links: one descriptor per session, at most `zenoh.max_sessions`.
+    let zenoh = if config.zenoh.enabled {
+        config.zenoh.max_sessions as u64
+    } else {
+        0
+    };
     config.grpc.max_connections as u64 + config.http.max_connections as u64 + zenoh + RESERVED_FDS
 }

@@ -56,7 +56,8 @@ pub fn encoding(full_name: &str) -> Encoding {
     Encoding::from(keys::encoding_for(full_name))
 }
 
-/// Builds the session configuration from ours (the JSON5 file first, then our keys on top).
+/// Builds the session configuration from ours (the JSON5 file first, then our keys on top,
+/// `max_sessions` included: the memory budget and the descriptor check count on it).
 pub fn session_config(cfg: &ZenohConfig, sec: &SecurityConfig) -> anyhow::Result<zenoh::Config> {
     let mut z = match &cfg.config_file {
         Some(path) => zenoh::Config::from_file(path)
@@ -80,6 +81,11 @@ pub fn session_config(cfg: &ZenohConfig, sec: &SecurityConfig) -> anyhow::Result
         &mut z,
         "transport/link/tx/queue/congestion_control/drop/wait_before_drop",
         format!("{}", (cfg.stalled_link_ms * 1e3).round() as i64),
+    )?;
+    set(
+        &mut z,
+        "transport/unicast/max_sessions",
+        cfg.max_sessions.to_string(),
     )?;
     crate::security::zenoh::apply(&mut z, sec)?;
     Ok(z)

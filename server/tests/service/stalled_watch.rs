@@ -56,3 +56,49 @@ async fn a_watcher_that_stops_reading_holds_up_nobody() {
     assert_eq!(stalled.streams(), 4);
     drop(stalled);
 }
+
+/// Peers that open streams and never read them take at most `grpc.max_streams` slots, however
+/// many connections they open: the next call is answered at once with RESOURCE_EXHAUSTED naming
+/// the setting and counted in `/metrics`, the service stays up for everyone else (the HTTP
+/// probes), and calls are served again once the streams close.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn open_streams_are_bounded_across_connections_and_refusals_counted() {
+    let mut c = test_config();
+    c.grpc.max_streams = 6;
+    let server = start(c).await;
+    let streams = server.metrics().streams.clone();
+    // Two connections of four streams each: the limit is fleet-wide, not per connection.
+    let a = stalled_watch(server.grpc_addr, 4).await.expect("first");
+    let b = stalled_watch(server.grpc_addr, 4).await.expect("second");
+    assert_eq!(streams.open.get(), 6, "six slots taken");
+    let mut refused_so_far = streams.refused.get();
+    assert_eq!(refused_so_far, 2, "two streams of the second connection refused");
+    // A well-behaved client is refused too, at once and with the reason.
+    let status = client(&server)
+        .await
+        .list_vehicles(pb::ListVehiclesRequest::default())
+        .await
+        .expect_err("no slot");
+    assert_eq!(status.code(), tonic::Code::ResourceExhausted, "{status:?}");
+    assert!(status.message().contains("grpc.max_streams"), "{status:?}");
+    refused_so_far += 1;
+    assert_eq!(streams.refused.get(), refused_so_far);
+    let text = server.metrics().encode();
+    assert!(text.contains("uavnav_grpc_streams_refused_total 3"), "{text}");
+    assert!(text.contains("uavnav_grpc_streams_open 6"), "{text}");
+    // The peers go away: their slots come back and calls are served.
+    drop(a);
+    drop(b);
+    assert!(
+        eventually(Duration::from_secs(10), || streams.open.get() == 0).await,
+        "open streams after the peers left: {}",
+        streams.open.get()
+    );
+    client(&server)
+        .await
+        .list_vehicles(pb::ListVehiclesRequest::default())
+        .await
+        .expect("served again");
+    assert_eq!(streams.refused.get(), refused_so_far);
+    server.shutdown().await.unwrap();
+}
