@@ -120,6 +120,9 @@ pub struct PoseHealth {
     pub mag: SourceSummary,
     /// Barometric height.
     pub baro: SourceSummary,
+    /// Roll and pitch from the GNSS acceleration (`paper` profile, our addition; never fused by
+    /// `eskf`, whose GNSS velocity update carries the same information).
+    pub gnss_tilt: SourceSummary,
     /// Inputs refused by validation (NaN, time going backwards, …).
     pub inputs_rejected: u64,
     /// Measurements that arrived behind the fusion horizon and were dropped.

@@ -24,6 +24,9 @@ pub struct Health {
     pub mag: InnovDiag,
     /// Barometric height diagnostics (fused only without GNSS height).
     pub baro: InnovDiag,
+    /// GNSS-acceleration tilt diagnostics (`paper` profile, our addition: computed at every
+    /// window, fused or not).
+    pub gnss_tilt: InnovDiag,
     /// Heading resets from the yaw estimator after alignment.
     pub yaw_resets: u32,
     /// Filter restarts after a detected divergence (paper profile: roll or pitch far from the
@@ -55,6 +58,7 @@ impl Default for Health {
             vision_trans: InnovDiag::new(),
             mag: InnovDiag::new(),
             baro: InnovDiag::new(),
+            gnss_tilt: InnovDiag::new(),
             yaw_resets: 0,
             divergence_resets: 0,
             inputs_rejected: 0,
@@ -87,6 +91,7 @@ impl From<&Health> for PoseHealth {
             vision_trans: (&h.vision_trans).into(),
             mag: (&h.mag).into(),
             baro: (&h.baro).into(),
+            gnss_tilt: (&h.gnss_tilt).into(),
             inputs_rejected: h.inputs_rejected,
             late_dropped: h.late_dropped,
             vision_no_clone: h.vision_no_clone,

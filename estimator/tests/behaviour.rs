@@ -629,3 +629,27 @@ fn crowded_stamps_and_floods_stay_within_the_buffer_bound() {
         assert!(out.pos_ned_m.iter().all(|v| v.is_finite()));
     }
 }
+
+/// The `paper` profile's GNSS-acceleration tilt source reports itself in every output's health
+/// (fused and rejected windows, the latest test ratio); `eskf` has no such source and says so.
+#[test]
+fn the_gnss_tilt_source_is_in_the_health_of_the_profile_that_has_it() {
+    let flight = Flight::new(&scenario("smoke", None)).unwrap();
+    let paper = run(&flight, &RunCfg::new(FilterProfile::Paper, true, None));
+    let last = paper.last().unwrap().health.gnss_tilt;
+    // About one window a second over the 20 s flight, once the filters are up.
+    assert!(last.fused >= 5, "{last:?}");
+    assert!(last.fused + last.rejected <= 25, "{last:?}");
+    assert!(last.test_ratio.is_finite() && last.test_ratio >= 0.0, "{last:?}");
+    // The count only grows, output by output.
+    assert!(
+        paper
+            .windows(2)
+            .all(|w| w[1].health.gnss_tilt.fused >= w[0].health.gnss_tilt.fused)
+    );
+    let eskf = run(&flight, &RunCfg::new(FilterProfile::Eskf, true, None));
+    assert!(
+        eskf.iter()
+            .all(|o| o.health.gnss_tilt == Default::default())
+    );
+}

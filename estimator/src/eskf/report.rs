@@ -5,7 +5,8 @@ use nalgebra::{Matrix3, Vector3};
 use uavnav_core::MotionPrior;
 
 use super::Eskf;
-use crate::health::{Health, Mode, PoseHealth};
+use crate::aid_sources::InnovDiag;
+use crate::health::{Health, Mode, PoseHealth, SourceSummary};
 use crate::output::{AidingFlags, PoseOutput, euler_sigma_at};
 use crate::state::{IP, ITH, IV, N};
 
@@ -52,6 +53,7 @@ impl Eskf {
             vision_trans: self.vision.trans,
             mag: self.mag.diag,
             baro: self.baro.diag,
+            gnss_tilt: InnovDiag::new(),
             yaw_resets: self.yaw_resets,
             divergence_resets: 0,
             inputs_rejected: 0,
@@ -73,6 +75,7 @@ impl Eskf {
             vision_trans: (&self.vision.trans).into(),
             mag: (&self.mag.diag).into(),
             baro: (&self.baro.diag).into(),
+            gnss_tilt: SourceSummary::default(),
             inputs_rejected: 0,
             late_dropped: self.late_dropped,
             vision_no_clone: self.vision.no_clone,

@@ -53,6 +53,7 @@ impl PaperFilter {
     pub fn health(&self) -> Health {
         let mut h = self.health;
         h.divergence_resets = self.divergence_resets;
+        h.gnss_tilt = self.gnss_tilt.diag;
         let t = self.imu.back().map(|s| s.t_ns).unwrap_or(0);
         let to = self.params.aid_timeout_ns;
         h.mode = match (&self.att, &self.gps_imu) {

@@ -194,6 +194,7 @@ fn innovation(h: &Health) -> pb::InnovationRatios {
         vision: h.vision_rot.test_ratio.max(h.vision_trans.test_ratio),
         magnetometer: h.mag.test_ratio,
         barometer: h.baro.test_ratio,
+        gnss_tilt: h.gnss_tilt.test_ratio,
     }
 }
 
