@@ -640,7 +640,10 @@ fn the_gnss_tilt_source_is_in_the_health_of_the_profile_that_has_it() {
     // About one window a second over the 20 s flight, once the filters are up.
     assert!(last.fused >= 5, "{last:?}");
     assert!(last.fused + last.rejected <= 25, "{last:?}");
-    assert!(last.test_ratio.is_finite() && last.test_ratio >= 0.0, "{last:?}");
+    assert!(
+        last.test_ratio.is_finite() && last.test_ratio >= 0.0,
+        "{last:?}"
+    );
     // The count only grows, output by output.
     assert!(
         paper

@@ -72,7 +72,10 @@ async fn open_streams_are_bounded_across_connections_and_refusals_counted() {
     let b = stalled_watch(server.grpc_addr, 4).await.expect("second");
     assert_eq!(streams.open.get(), 6, "six slots taken");
     let mut refused_so_far = streams.refused.get();
-    assert_eq!(refused_so_far, 2, "two streams of the second connection refused");
+    assert_eq!(
+        refused_so_far, 2,
+        "two streams of the second connection refused"
+    );
     // A well-behaved client is refused too, at once and with the reason.
     let status = client(&server)
         .await
@@ -84,7 +87,10 @@ async fn open_streams_are_bounded_across_connections_and_refusals_counted() {
     refused_so_far += 1;
     assert_eq!(streams.refused.get(), refused_so_far);
     let text = server.metrics().encode();
-    assert!(text.contains("uavnav_grpc_streams_refused_total 3"), "{text}");
+    assert!(
+        text.contains("uavnav_grpc_streams_refused_total 3"),
+        "{text}"
+    );
     assert!(text.contains("uavnav_grpc_streams_open 6"), "{text}");
     // The peers go away: their slots come back and calls are served.
     drop(a);
