@@ -28,7 +28,7 @@ use crate::transport::conn::{self, ConnLimits, ListenerKind, TlsSide};
 use crate::transport::grpc::{UavNavService, remap_transport_status};
 use crate::transport::grpc_serve::{self, Http2Settings};
 use crate::transport::http::{HttpState, router};
-use crate::transport::stream_limit::{StreamLimit, StreamLimitLayer};
+use crate::transport::stream_limit::{StreamLimit, StreamLimitService};
 use crate::transport::zenoh::ZenohIo;
 use crate::vehicle::actor::{Ctx, Msg};
 use crate::vehicle::engine::{SharedFactory, default_factory};
@@ -315,7 +315,9 @@ async fn serve_grpc(
         .layer(axum::middleware::map_response(
             remap_transport_status::<tonic::body::Body>,
         ))
-        .layer(StreamLimitLayer::new(streams))
+        .layer(tower::layer::layer_fn(move |inner| {
+            StreamLimitService::new(inner, streams.clone())
+        }))
         .layer(ArrivalLayer::new(arrivals))
         .service(routes.routes().prepare());
     let settings = Http2Settings {

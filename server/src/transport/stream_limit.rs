@@ -5,7 +5,7 @@
 //! of one connection (`grpc.max_streams_per_connection`) and the accept loop the connections
 //! (`grpc.max_connections`), but their product at the defaults, 32,768 streams, would be 9 GiB:
 //! more than the memory of the machines this service is meant for, taken by any peer that opens
-//! streams it never reads. [`StreamLimitLayer`] holds a slot of a shared [`StreamLimit`] from
+//! streams it never reads. [`StreamLimitService`] holds a slot of a shared [`StreamLimit`] from
 //! the moment a call arrives until its response body is dropped (when the stream ends, however
 //! it ends). A call that finds every slot taken is answered at once with RESOURCE_EXHAUSTED
 //! naming `grpc.max_streams`, before any handler runs, and counted in
@@ -146,35 +146,18 @@ impl HttpBody for SlotBody {
     }
 }
 
-/// Wraps the gRPC routes so that every call holds a [`StreamLimit`] slot.
-#[derive(Debug, Clone)]
-pub struct StreamLimitLayer {
-    limit: Arc<StreamLimit>,
-}
-
-impl StreamLimitLayer {
-    /// A layer drawing on `limit`.
-    pub fn new(limit: Arc<StreamLimit>) -> Self {
-        Self { limit }
-    }
-}
-
-impl<S> tower::Layer<S> for StreamLimitLayer {
-    type Service = StreamLimitService<S>;
-
-    fn layer(&self, inner: S) -> Self::Service {
-        StreamLimitService {
-            inner,
-            limit: self.limit.clone(),
-        }
-    }
-}
-
-/// [`StreamLimitLayer`]'s service.
+/// The gRPC routes wrapped so that every call holds a [`StreamLimit`] slot.
 #[derive(Debug, Clone)]
 pub struct StreamLimitService<S> {
     inner: S,
     limit: Arc<StreamLimit>,
+}
+
+impl<S> StreamLimitService<S> {
+    /// `inner`, drawing on `limit`.
+    pub fn new(inner: S, limit: Arc<StreamLimit>) -> Self {
+        Self { inner, limit }
+    }
 }
 
 impl<S> tower::Service<Request<Body>> for StreamLimitService<S>
@@ -208,7 +191,7 @@ where
 mod tests {
     use super::*;
     use std::convert::Infallible;
-    use tower::{Layer, Service, ServiceExt};
+    use tower::{Service, ServiceExt};
 
     fn limit(n: usize) -> Arc<StreamLimit> {
         Arc::new(StreamLimit::new(n, StreamMetrics::default()))
@@ -238,7 +221,7 @@ mod tests {
                 Bytes::from_static(b"pose"),
             ))))
         });
-        let mut svc = StreamLimitLayer::new(l.clone()).layer(routes);
+        let mut svc = StreamLimitService::new(routes, l.clone());
         let first = svc
             .ready()
             .await
