@@ -7,8 +7,10 @@
 //! of the process is sampled every 5 ms. Targets: the peak never above the formula's total, and
 //! once the attacks are over and their vehicles evicted, the resident memory back within 20 % of
 //! the baseline taken before them; and attack 6 (watch streams whose peers stop reading while
-//! vehicles fly) within the formula's terms for what it uses: its four connections at the stream
-//! limit, its vehicles and the output rings. The baseline is the service at rest after normal use: one
+//! vehicles fly) within the formula's terms for what it uses: its connections (four, or
+//! `--stalled-conns N`) at the per-connection stream limit, no more streams than
+//! `grpc.max_streams` (`--max-streams N` sets it; the rest are refused), its vehicles and the
+//! output rings. The baseline is the service at rest after normal use: one
 //! vehicle flown for 3 s and evicted (`warm_up`), so that what its code paths page in is not
 //! counted against the attacks; `--cold` takes it from the service that has served nothing. Runs with the allocator options of `uavnavd`
 //! (`uavnavd::allocator`), unless the environment sets them. The `live` column is the bytes live
@@ -386,6 +388,17 @@ async fn attacks_async() {
         uavnav_tests::service::listen_zenoh(&mut cfg);
     }
     cfg.vehicles.idle_evict_s = 2.0;
+    // `--max-streams N`: `grpc.max_streams` (with `--stalled-conns`, attack 6 then tries more
+    // streams than it admits).
+    if let Some(n) = args
+        .iter()
+        .position(|a| a == "--max-streams")
+        .and_then(|i| args.get(i + 1))
+        .and_then(|v| v.parse().ok())
+    {
+        cfg.grpc.max_streams = n;
+    }
+    let max_streams = cfg.grpc.max_streams as u64;
     let budget = MemoryBudget::of(&cfg);
     println!("the formula for this configuration:\n{budget}");
     let (max_message, total_pixels, streams) = (
@@ -505,20 +518,30 @@ async fn attacks_async() {
             .and_then(|i| args.get(i + 1))
             .and_then(|v| v.parse().ok())
             .unwrap_or(4);
-        let n = stalled_readers(&server, 4, per_conn, &flight, vehicles).await;
+        // `--stalled-conns N`: N connections instead of 4.
+        let conns: usize = args
+            .iter()
+            .position(|a| a == "--stalled-conns")
+            .and_then(|i| args.get(i + 1))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(4);
+        let n = stalled_readers(&server, conns, per_conn, &flight, vehicles).await;
         let peak = sampler.take();
         let grown = peak.saturating_sub(baseline);
-        // What the formula allows this attack: its connections at the stream limit, its
-        // vehicles with full input queues, and the output rings.
-        let allowed = 4
-            * (u64::from(uavnavd::budget::GRPC_CONNECTION_WINDOW)
-                + u64::from(streams) * uavnavd::budget::GRPC_STREAM_BYTES)
+        // What the formula allows this attack: its connections' windows, their streams (at most
+        // `grpc.max_streams`: the rest are refused), its vehicles with full input queues, and
+        // the output rings.
+        let admitted = (conns as u64 * u64::from(streams)).min(max_streams);
+        let allowed = conns as u64 * u64::from(uavnavd::budget::GRPC_CONNECTION_WINDOW)
+            + admitted * uavnavd::budget::GRPC_STREAM_BYTES
             + vehicles as u64 * (uavnavd::budget::VEHICLE_BYTES + input_queue_bytes)
             + uavnavd::budget::output_ring_bytes();
         println!(
-            "  {n} stalled streams, {vehicles} vehicles: {:.1} MiB above the baseline, against \
-             {:.1} MiB that the formula's terms allow them (4 connections, {vehicles} vehicles, \
-             the output rings); live in the allocator {:+.1} MiB",
+            "  {n} stalled streams answered ({} refused by grpc.max_streams), {vehicles} \
+             vehicles: {:.1} MiB above the baseline, against {:.1} MiB that the formula's terms \
+             allow them ({conns} connections, {admitted} streams, {vehicles} vehicles, the output \
+             rings); live in the allocator {:+.1} MiB",
+            server.metrics().streams.refused.get(),
             mib(grown),
             mib(allowed),
             (live_bytes() as f64 - live_before as f64) / f64::from(1u32 << 20),
