@@ -366,22 +366,19 @@ fn attacks() {
     b.build().unwrap().block_on(attacks_async());
 }
 
+/// The value after `name` on the command line, parsed (`None` when absent or unparsable).
+fn value_of<T: std::str::FromStr>(args: &[String], name: &str) -> Option<T> {
+    let i = args.iter().position(|a| a == name)?;
+    args.get(i + 1)?.parse().ok()
+}
+
 async fn attacks_async() {
     let args: Vec<String> = std::env::args().collect();
-    let ids = args
-        .iter()
-        .position(|a| a == "--ids")
-        .and_then(|i| args.get(i + 1))
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(20_000usize);
+    let ids = value_of(&args, "--ids").unwrap_or(20_000usize);
     let flag = |name: &str| args.iter().any(|a| a == name);
     // `--only N` runs attack N (1-6) alone; `--no-zenoh` runs without Zenoh: both tell where
     // what stays after the attacks comes from.
-    let only: Option<usize> = args
-        .iter()
-        .position(|a| a == "--only")
-        .and_then(|i| args.get(i + 1))
-        .and_then(|v| v.parse().ok());
+    let only: Option<usize> = value_of(&args, "--only");
     let run = |n: usize| only.is_none_or(|o| o == n);
     let mut cfg = uavnav_tests::service::loopback_config();
     if !flag("--no-zenoh") {
@@ -390,12 +387,7 @@ async fn attacks_async() {
     cfg.vehicles.idle_evict_s = 2.0;
     // `--max-streams N`: `grpc.max_streams` (with `--stalled-conns`, attack 6 then tries more
     // streams than it admits).
-    if let Some(n) = args
-        .iter()
-        .position(|a| a == "--max-streams")
-        .and_then(|i| args.get(i + 1))
-        .and_then(|v| v.parse().ok())
-    {
+    if let Some(n) = value_of(&args, "--max-streams") {
         cfg.grpc.max_streams = n;
     }
     let max_streams = cfg.grpc.max_streams as u64;
@@ -505,26 +497,11 @@ async fn attacks_async() {
         let live_before = live_bytes();
         sampler.take();
         // `--stalled-streams N`: N streams per connection instead (0: the vehicles alone).
-        let per_conn = args
-            .iter()
-            .position(|a| a == "--stalled-streams")
-            .and_then(|i| args.get(i + 1))
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(streams);
+        let per_conn = value_of(&args, "--stalled-streams").unwrap_or(streams);
         // `--stalled-vehicles N`: N vehicles fly instead of 4 (0: the streams alone).
-        let vehicles = args
-            .iter()
-            .position(|a| a == "--stalled-vehicles")
-            .and_then(|i| args.get(i + 1))
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(4);
+        let vehicles = value_of(&args, "--stalled-vehicles").unwrap_or(4);
         // `--stalled-conns N`: N connections instead of 4.
-        let conns: usize = args
-            .iter()
-            .position(|a| a == "--stalled-conns")
-            .and_then(|i| args.get(i + 1))
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(4);
+        let conns: usize = value_of(&args, "--stalled-conns").unwrap_or(4);
         let n = stalled_readers(&server, conns, per_conn, &flight, vehicles).await;
         let peak = sampler.take();
         let grown = peak.saturating_sub(baseline);
@@ -559,12 +536,7 @@ async fn attacks_async() {
     // `--settle-s S`: the idle service is watched S s more before the final figure, printed
     // every 5 s (does what the allocator kept come back with time? It did not: 29.8 → 29.9 MiB
     // over 30 s). Default 0.
-    let settle_s: u64 = args
-        .iter()
-        .position(|a| a == "--settle-s")
-        .and_then(|i| args.get(i + 1))
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(0);
+    let settle_s: u64 = value_of(&args, "--settle-s").unwrap_or(0);
     for s in 0..settle_s {
         tokio::time::sleep(Duration::from_secs(1)).await;
         if (s + 1) % 5 == 0 {
