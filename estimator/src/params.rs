@@ -136,6 +136,13 @@ pub struct EstimatorParams {
     /// it drifted to 6–9° of roll/pitch RMSE on the shared real flights. `false` gives the
     /// paper's filter as written.
     pub paper_gnss_tilt: bool,
+    /// Paper profile, OUR ADDITION (not in the paper): the heading of a vehicle whose course is
+    /// not its heading (a multirotor, unless `course_heading`) from the yaw-hypothesis bank fed by
+    /// the IMU and the GNSS velocity (`paper::heading`), handed to the attitude filter once the
+    /// bank has converged and reset to it when the two disagree for `yaw_reset_timeout_ns`.
+    /// Without it such a vehicle has no heading in this profile (its yaw σ says so). `false`
+    /// gives the paper's filter as written.
+    pub paper_yaw_bank: bool,
     /// Position σ above which the filter is declared diverged, m.
     pub diverged_pos_sigma_m: f64,
     /// 1-σ error of a magnetometer heading, rad: calibration residue and motor interference, which
@@ -206,6 +213,7 @@ impl Default for EstimatorParams {
             paper_video_direction: true,
             paper_direction_cov_scale: 1.0,
             paper_gnss_tilt: true,
+            paper_yaw_bank: true,
             diverged_pos_sigma_m: 5_000.0,
             mag_heading_sigma_rad: 0.2,
             mag_max_inclination_error_rad: 10f64.to_radians(),

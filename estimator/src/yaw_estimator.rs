@@ -172,6 +172,11 @@ impl YawEstimator {
         }
     }
 
+    /// Its tuning.
+    pub fn params(&self) -> &YawEstimatorParams {
+        &self.params
+    }
+
     /// Whether the bank runs (after its first GNSS velocity).
     pub fn started(&self) -> bool {
         self.started

@@ -183,3 +183,52 @@ fn a_compass_mounted_off_is_not_confidently_wrong() {
     assert!(max_after < 2f64.to_radians(), "{max_after}");
     assert!(within >= 0.9, "{within}");
 }
+
+/// The `paper` profile on the same flight without a magnetometer: its heading comes from the yaw
+/// bank (`EstimatorParams::paper_yaw_bank`, our addition), so once the vehicle has accelerated
+/// it is known, and before that the stated σ covers the error. With `paper_yaw_bank = false` the
+/// profile has no heading for a multirotor at all (it does not take the course as the heading).
+#[test]
+fn paper_profile_takes_a_multirotor_heading_from_the_yaw_bank() {
+    for k in [0usize, 3, 6, 9] {
+        let heading = -180.0 + 30.0 * k as f64 + 7.0;
+        let f = flight(heading, false);
+        let mut config = f.vehicle_config();
+        config.profile = uavnav_core::FilterProfile::Paper;
+        let run_paper = |params: EstimatorParams| {
+            let mut est = Estimator::new(&config, params, Some(f.origin()));
+            let (mut g, mut out) = (0, Vec::new());
+            for s in f.imu() {
+                while g < f.gnss().len() && f.gnss()[g].t_ns <= s.t_ns {
+                    est.push_gnss(&f.gnss()[g]).unwrap();
+                    g += 1;
+                }
+                if let Some(p) = est.push_imu(s).unwrap() {
+                    out.push(p);
+                }
+            }
+            (out, est.health().yaw_resets)
+        };
+        let (poses, resets) = run_paper(EstimatorParams::default());
+        let (within, max_after) = yaw_scores(&f, &poses, 30.0);
+        eprintln!(
+            "paper, heading {heading:6.1}: within 3 sigma {:.1} %, max |yaw error| after 30 s {:.2} deg, yaw resets {resets}",
+            100.0 * within,
+            max_after.to_degrees()
+        );
+        assert!(within >= 0.95, "heading {heading}: {within}");
+        assert!(
+            max_after < 5f64.to_radians(),
+            "heading {heading}: {max_after}"
+        );
+        // As written, the paper's filter never learns this heading (it starts at 0).
+        let (as_written, _) = run_paper(EstimatorParams {
+            paper_yaw_bank: false,
+            ..EstimatorParams::default()
+        });
+        let (_, max_written) = yaw_scores(&f, &as_written, 30.0);
+        if wrap_pi(heading.to_radians()).abs() > 0.5 {
+            assert!(max_written > 0.4, "heading {heading}: {max_written}");
+        }
+    }
+}

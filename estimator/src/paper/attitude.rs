@@ -261,6 +261,22 @@ impl AttitudeEkf {
         self.update(y, &h, r, gate, self.t_ns, diag)
     }
 
+    /// Sets the yaw to `yaw` with 1-σ `sigma` (rad), independent of everything else (its
+    /// cross-covariances cleared): a heading from another source. The history is turned by the
+    /// same angle, so that late measurements compare against the new heading.
+    pub fn set_yaw(&mut self, yaw: f64, sigma: f64) {
+        let d = wrap_pi(yaw - self.euler.z);
+        self.euler.z = wrap_pi(yaw);
+        for h in self.hist.iter_mut() {
+            h.1.z = wrap_pi(h.1.z + d);
+        }
+        for k in 0..6 {
+            self.p[(2, k)] = 0.0;
+            self.p[(k, 2)] = 0.0;
+        }
+        self.p[(2, 2)] = sigma * sigma;
+    }
+
     /// Adds `var` (rad²) to the roll and pitch variances.
     pub fn widen_tilt(&mut self, var: f64) {
         self.p[(0, 0)] += var;

@@ -8,6 +8,7 @@
 //! | [`posvel`] | GPS-IMU (eqs. 29, 30, 32, 33) and VIDEO-IMU(2) (eq. 35): position/velocity EKFs |
 //! | this file | the three filters' state, IMU stepping, GNSS fixes, alignment, divergence check |
 //! | [`gnss_tilt`] | our addition: roll/pitch from the GNSS acceleration while no video chain runs |
+//! | [`heading`] | our addition: a multirotor's heading from the yaw-hypothesis bank |
 //! | `video` | egomotion in: eq. (34), eq. (D1) while GNSS is fused, eq. (35) in outages |
 //! | `report` | motion prior, health and the pose output with its stated σ |
 //!
@@ -33,11 +34,16 @@
 //!   accelerometers over windows of about a second ([`gnss_tilt`]); the alignment then takes only
 //!   the course from GNSS.
 //!
+//! - Beyond the paper (our addition, `EstimatorParams::paper_yaw_bank`): a vehicle whose course
+//!   is not its heading (a multirotor) takes its heading from the yaw-hypothesis bank once that
+//!   has converged ([`heading`]).
+//!
 //! The un-modelled gyro bias is covered by extra process noise (with `paper_gnss_tilt`, a bias
 //! learnt from the windows' corrections is also taken off the gyro).
 
 pub mod attitude;
 pub mod gnss_tilt;
+pub mod heading;
 pub mod posvel;
 mod report;
 mod video;
@@ -129,6 +135,8 @@ pub struct PaperFilter {
     divergence_resets: u32,
     /// Roll and pitch from the GNSS acceleration (`gnss_tilt`, our addition).
     gnss_tilt: gnss_tilt::GnssTilt,
+    /// The heading from the yaw-hypothesis bank (`heading`, our addition).
+    heading: heading::BankHeading,
 }
 
 /// Roll or pitch this far from the accelerometer's tilt (with the GNSS acceleration removed) for
@@ -198,9 +206,14 @@ impl PaperFilter {
             tilt_disagree: 0,
             divergence_resets: 0,
             gnss_tilt: gnss_tilt::GnssTilt::default(),
+            heading: heading::BankHeading::new(Default::default(), false),
         };
         s.course_heading =
             s.params.course_heading || config.airframe == uavnav_core::Airframe::FixedWing;
+        s.heading = heading::BankHeading::new(
+            s.params.yaw_estimator,
+            s.params.paper_yaw_bank && !s.course_heading,
+        );
         if let Some(o) = origin {
             s.set_frame(o);
         }
@@ -234,6 +247,8 @@ impl PaperFilter {
         fresh.divergence_resets = 0;
         fresh.observed_psd = (0.0, 0.0);
         fresh.gnss_tilt = gnss_tilt::GnssTilt::default();
+        fresh.heading.restart();
+        fresh.heading.resets = 0;
         *self = fresh;
         if let Some(o) = cfg_frame {
             self.set_frame(o);
@@ -289,6 +304,8 @@ impl PaperFilter {
             gyro_psd + self.params.paper_gyro_instability_psd,
             s.t_ns,
         );
+        self.heading
+            .add_imu(&(m.gyro - self.gnss_tilt.gyro_bias_radps()), &m.accel, dt_s);
         let c = att.rotation();
         let att_var = att.p_euler().trace() / 3.0;
         let g = self
@@ -387,9 +404,11 @@ impl PaperFilter {
         if self.diverged(&f_mean, &(g - a_n)) {
             // Restart from the next fixes (same frame), counted and visible as Initialising.
             let (resets, frame) = (self.divergence_resets + 1, self.frame);
+            let yaw_resets = self.heading.resets;
             self.reset();
             self.frame = frame;
             self.divergence_resets = resets;
+            self.heading.resets = yaw_resets;
             return;
         }
         let start_var = self.params.paper_video_start_sigma_rad.powi(2);
@@ -432,6 +451,13 @@ impl PaperFilter {
         let (Some(att), Some(gi)) = (self.att.as_mut(), self.gps_imu.as_mut()) else {
             return;
         };
+        self.heading.at_fix(
+            meas.t_ns,
+            meas.vel_h_mps.unwrap_or_else(|| meas_vel.xy()),
+            meas.sigma_vel_mps,
+            att,
+            self.params.yaw_reset_timeout_ns,
+        );
         let w_nb = gyro - att.rotation().transpose() * self.w_ie;
         let gate = self.params.gate_sigma;
         if self.params.paper_gnss_tilt {

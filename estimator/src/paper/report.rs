@@ -54,6 +54,7 @@ impl PaperFilter {
         let mut h = self.health;
         h.divergence_resets = self.divergence_resets;
         h.gnss_tilt = self.gnss_tilt.diag;
+        h.yaw_resets = self.heading.resets;
         let t = self.imu.back().map(|s| s.t_ns).unwrap_or(0);
         let to = self.params.aid_timeout_ns;
         h.mode = match (&self.att, &self.gps_imu) {
@@ -97,6 +98,10 @@ impl PaperFilter {
         let h = self.health();
         let to = self.params.aid_timeout_ns;
         let sd = |m: &Matrix3<f64>| m.diagonal().map(|v| v.max(0.0).sqrt());
+        let mut sigma_att = sd(&att.p_euler());
+        if !att.video_active() {
+            sigma_att.z = sigma_att.z.max(self.heading.reported_sigma_floor_rad());
+        }
         Some(PoseOutput {
             t_ns,
             lla: frame.ned_to_lla(&pv.x),
@@ -106,7 +111,7 @@ impl PaperFilter {
             euler_rad: crate::output::canonical_euler(&att.euler),
             sigma_pos_ned_m: sd(&pos_cov),
             sigma_vel_mps: sd(&pv.p.fixed_view::<3, 3>(3, 3).into_owned()),
-            sigma_att_rad: sd(&att.p_euler()),
+            sigma_att_rad: sigma_att,
             gyro_bias_radps: Vector3::zeros(),
             accel_bias_mps2: Vector3::zeros(),
             health: (&h).into(),

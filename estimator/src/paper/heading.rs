@@ -1,0 +1,159 @@
+//! Profile `paper`, OUR ADDITION (not in the paper; `EstimatorParams::paper_yaw_bank`): the heading
+//! of a vehicle whose GNSS course is not its heading, from the yaw-hypothesis bank
+//! ([`crate::yaw_estimator`], shared with `eskf`).
+//!
+//! The paper aligns the heading from the GNSS course (a fixed wing flies where it points). A
+//! multirotor hovers and flies sideways and backwards, so this profile does not take its course
+//! as the heading; before this source it had no heading at all for one (its yaw σ said so, a
+//! heading uniform round the circle, and the shared real copter's yaw was 148° RMSE from the
+//! autopilot's). The bank of heading hypotheses, fed by the IMU and the GNSS horizontal velocity,
+//! tells the heading once the vehicle accelerates horizontally, in any direction of the body.
+//!
+//! Lifecycle:
+//! - **off** with `paper_yaw_bank = false` or when the course gives the heading (a fixed wing,
+//!   or `course_heading`);
+//! - **starting** from the filters' start: the bank runs on every IMU interval (the gyro less
+//!   the bias `gnss_tilt` has learnt) and every fix's horizontal velocity;
+//! - **active** once the bank has converged (its σ below `yaw_estimator.converged_sigma_rad`,
+//!   steadily): the attitude filter's yaw is set to the bank's, with the bank's σ (at least
+//!   [`MIN_HANDOVER_SIGMA_RAD`]), and the yaw's cross-covariances are cleared; from then on the
+//!   paper's filter carries the heading (gyro integration, the lever arm, and `gnss_tilt` once
+//!   the yaw σ is small enough for it);
+//! - **reset** when the converged bank and the filter disagree by more than 3σ of their combined
+//!   uncertainty for `yaw_reset_timeout_ns` in a row: the yaw is set to the bank's again,
+//!   counted in the health's `yaw_resets`;
+//! - back to **starting** with the filters at a restart (the divergence check).
+//!
+//! The disagreement with the bank and its test ratio are computed at every fix while the bank
+//! has converged, whether or not anything is reset.
+//!
+//! Reported σ: while the heading is from the bank and no video chain runs, the output's yaw σ
+//! is at least what the bank can honestly claim ([`YawEstimator::honest_sigma_rad`]): the
+//! filter's own yaw σ shrinks on what its linear model believes while a hover leaves the heading
+//! unobservable, as in `eskf`.
+
+use super::attitude::AttitudeEkf;
+use crate::yaw_estimator::{YawEstimator, YawEstimatorParams};
+
+/// Least yaw σ handed over from the bank, rad: the bank's σ can be over-confident at the moment
+/// it converges (its models take their specific-force noise as white), and a σ below
+/// `gnss_tilt`'s limit for correcting the heading lets the GNSS acceleration refine it from there.
+pub const MIN_HANDOVER_SIGMA_RAD: f64 = 0.087; // 5°
+
+/// Where the heading source stands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum BankState {
+    /// Not used (disabled, or the course gives the heading).
+    #[default]
+    Off,
+    /// The bank runs; the filter's heading is still unknown.
+    Starting,
+    /// The filter's heading came from the bank.
+    Active,
+}
+
+/// The bank and its hand-over to the attitude filter.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BankHeading {
+    bank: YawEstimator,
+    /// Lifecycle state.
+    pub state: BankState,
+    /// Since when the converged bank has disagreed with the filter beyond 3σ, ns.
+    contradicted_since_ns: Option<i64>,
+    /// The last disagreement (filter − bank, rad) over 3σ of the combined uncertainty; computed
+    /// at every fix while the bank has converged (diagnostics).
+    pub test_ratio: f64,
+    /// Heading resets to the bank after the first alignment.
+    pub resets: u32,
+}
+
+impl BankHeading {
+    /// A source that starts with the filters when `enabled`.
+    pub fn new(params: YawEstimatorParams, enabled: bool) -> Self {
+        Self {
+            bank: YawEstimator::new(params),
+            state: if enabled {
+                BankState::Starting
+            } else {
+                BankState::Off
+            },
+            contradicted_since_ns: None,
+            test_ratio: 0.0,
+            resets: 0,
+        }
+    }
+
+    /// Back to the start (the filters restarted); the reset count is kept.
+    pub fn restart(&mut self) {
+        let resets = self.resets;
+        let enabled = self.state != BankState::Off;
+        *self = Self::new(*self.bank_params(), enabled);
+        self.resets = resets;
+    }
+
+    fn bank_params(&self) -> &YawEstimatorParams {
+        self.bank.params()
+    }
+
+    /// One IMU interval: mean gyro (bias removed) and specific force, body frame.
+    pub fn add_imu(
+        &mut self,
+        gyro: &nalgebra::Vector3<f64>,
+        accel: &nalgebra::Vector3<f64>,
+        dt_s: f64,
+    ) {
+        if self.state != BankState::Off {
+            self.bank.predict(gyro, accel, dt_s);
+        }
+    }
+
+    /// A fix's horizontal velocity (N, E, m/s, σ m/s): the bank's update, then the hand-over or
+    /// the reset of the attitude filter's heading. `reset_timeout_ns` is how long a contradiction
+    /// must last before the reset.
+    pub fn at_fix(
+        &mut self,
+        t_ns: i64,
+        vel_h_mps: nalgebra::Vector2<f64>,
+        sigma_vel_mps: f64,
+        att: &mut AttitudeEkf,
+        reset_timeout_ns: i64,
+    ) {
+        if self.state == BankState::Off {
+            return;
+        }
+        self.bank.fuse_velocity(t_ns, vel_h_mps, sigma_vel_mps);
+        let Some((yaw, sigma)) = self.bank.converged_yaw() else {
+            self.contradicted_since_ns = None;
+            return;
+        };
+        if self.state == BankState::Starting {
+            att.set_yaw(yaw, sigma.max(MIN_HANDOVER_SIGMA_RAD));
+            self.state = BankState::Active;
+            self.test_ratio = 0.0;
+            return;
+        }
+        let d = uavnav_core::rotation::wrap_pi(att.euler.z - yaw);
+        let s = (att.p[(2, 2)].max(0.0) + sigma * sigma).sqrt();
+        self.test_ratio = d.abs() / (3.0 * s).max(1e-9);
+        if self.test_ratio <= 1.0 {
+            self.contradicted_since_ns = None;
+            return;
+        }
+        let since = *self.contradicted_since_ns.get_or_insert(t_ns);
+        if t_ns - since >= reset_timeout_ns {
+            att.set_yaw(yaw, sigma.max(MIN_HANDOVER_SIGMA_RAD));
+            self.resets += 1;
+            self.contradicted_since_ns = None;
+        }
+    }
+
+    /// The least yaw σ the output may state, rad: what the bank can honestly claim while the
+    /// heading is from it (0 otherwise).
+    pub fn reported_sigma_floor_rad(&self) -> f64 {
+        if self.state == BankState::Active {
+            self.bank.honest_sigma_rad().unwrap_or(0.0)
+        } else {
+            0.0
+        }
+    }
+}
