@@ -20,12 +20,15 @@
 //!   paper's filter carries the heading (gyro integration, the lever arm, and `gnss_tilt` once
 //!   the yaw σ is small enough for it);
 //! - **reset** when the converged bank and the filter disagree by more than 3σ of their combined
-//!   uncertainty for `yaw_reset_timeout_ns` in a row: the yaw is set to the bank's again,
-//!   counted in the health's `yaw_resets`;
+//!   uncertainty for `yaw_reset_timeout_ns` in a row, or, while the bank can tell the heading
+//!   (its honest σ, [`YawEstimator::honest_sigma_rad`], below `converged_sigma_rad`: a hover
+//!   cannot) without counting as converged (a long turn), by more than
+//!   [`GROSS_CONTRADICTION_RAD`] for [`GROSS_CONTRADICTION_NS`]: the yaw is set to the bank's
+//!   again, counted in the health's `yaw_resets`;
 //! - back to **starting** with the filters at a restart (the divergence check).
 //!
 //! The disagreement with the bank and its test ratio are computed at every fix while the bank
-//! has converged, whether or not anything is reset.
+//! can tell the heading, whether or not anything is reset.
 //!
 //! Reported σ: while the heading is from the bank and no video chain runs, the output's yaw σ
 //! is at least what the bank can honestly claim ([`YawEstimator::honest_sigma_rad`]): the
@@ -39,6 +42,13 @@ use crate::yaw_estimator::{YawEstimator, YawEstimatorParams};
 /// it converges (its models take their specific-force noise as white), and a σ below
 /// `gnss_tilt`'s limit for correcting the heading lets the GNSS acceleration refine it from there.
 pub const MIN_HANDOVER_SIGMA_RAD: f64 = 0.087; // 5°
+
+/// Smallest disagreement with a bank that can tell the heading but does not count as converged
+/// (see `at_fix`) that resets the filter's heading, rad: beyond what the bank's fix-to-fix noise
+/// and the filter's drift between resets explain (the compass-contradiction bound of `eskf`).
+pub const GROSS_CONTRADICTION_RAD: f64 = 0.79; // 45°
+/// ... and for how long it must last, ns.
+pub const GROSS_CONTRADICTION_NS: i64 = 5_000_000_000;
 
 /// Where the heading source stands.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -61,7 +71,7 @@ pub struct BankHeading {
     /// Since when the converged bank has disagreed with the filter beyond 3σ, ns.
     contradicted_since_ns: Option<i64>,
     /// The last disagreement (filter − bank, rad) over 3σ of the combined uncertainty; computed
-    /// at every fix while the bank has converged (diagnostics).
+    /// at every fix while the bank can tell the heading (diagnostics).
     pub test_ratio: f64,
     /// Heading resets to the bank after the first alignment.
     pub resets: u32,
@@ -122,25 +132,50 @@ impl BankHeading {
             return;
         }
         self.bank.fuse_velocity(t_ns, vel_h_mps, sigma_vel_mps);
-        let Some((yaw, sigma)) = self.bank.converged_yaw() else {
+        if self.state == BankState::Starting {
+            if let Some((yaw, sigma)) = self.bank.converged_yaw() {
+                att.set_yaw(yaw, sigma.max(MIN_HANDOVER_SIGMA_RAD));
+                self.state = BankState::Active;
+                self.test_ratio = 0.0;
+            }
+            return;
+        }
+        // After the hand-over: the converged bank (its heading holding still) resets the filter
+        // on a 3σ disagreement lasting `reset_timeout_ns`. A vehicle in a long turn never holds
+        // its heading still, so the bank never counts as converged there while it can tell the
+        // heading (its honest σ small): a fixed wing of unknown airframe circling for minutes
+        // drifted 50–120° from the bank, with σ 4–8°. Then only a gross contradiction resets,
+        // [`GROSS_CONTRADICTION_RAD`] for [`GROSS_CONTRADICTION_NS`]: resetting on every 3σ
+        // disagreement with an unsteady bank took a 10 Hz-IMU plane's roll and pitch from 5° to
+        // 8–14° of RMSE.
+        let converged = self.bank.converged_yaw();
+        let telling = match (self.bank.yaw(), self.bank.honest_sigma_rad()) {
+            (Some((yaw, _)), Some(s)) if s < self.bank_params().converged_sigma_rad => {
+                Some((yaw, s))
+            }
+            _ => None,
+        };
+        let Some((yaw, sigma)) = converged.or(telling) else {
             self.contradicted_since_ns = None;
             return;
         };
-        if self.state == BankState::Starting {
-            att.set_yaw(yaw, sigma.max(MIN_HANDOVER_SIGMA_RAD));
-            self.state = BankState::Active;
-            self.test_ratio = 0.0;
-            return;
-        }
         let d = uavnav_core::rotation::wrap_pi(att.euler.z - yaw);
         let s = (att.p[(2, 2)].max(0.0) + sigma * sigma).sqrt();
         self.test_ratio = d.abs() / (3.0 * s).max(1e-9);
-        if self.test_ratio <= 1.0 {
+        let (bound, timeout_ns) = if converged.is_some() {
+            (3.0 * s, reset_timeout_ns)
+        } else {
+            (
+                (3.0 * s).max(GROSS_CONTRADICTION_RAD),
+                GROSS_CONTRADICTION_NS,
+            )
+        };
+        if d.abs() <= bound {
             self.contradicted_since_ns = None;
             return;
         }
         let since = *self.contradicted_since_ns.get_or_insert(t_ns);
-        if t_ns - since >= reset_timeout_ns {
+        if t_ns - since >= timeout_ns {
             att.set_yaw(yaw, sigma.max(MIN_HANDOVER_SIGMA_RAD));
             self.resets += 1;
             self.contradicted_since_ns = None;
