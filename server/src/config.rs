@@ -182,6 +182,13 @@ pub struct GrpcConfig {
     /// not `max_connections × max_streams_per_connection`, bounds the streams' memory
     /// ([`crate::transport::stream_limit`]). At least 1.
     pub max_streams: usize,
+    /// Of those, streams one peer IP address may have open at once (all its connections
+    /// together); beyond, a new call from it is answered with RESOURCE_EXHAUSTED and counted
+    /// (`uavnav_grpc_streams_peer_refused_total`), so that one host cannot take every slot and
+    /// lock the other clients out. A ground station feeding a whole fleet from one address needs
+    /// one stream per vehicle at most. At least 1; a value above `max_streams` leaves only that
+    /// total.
+    pub max_streams_per_peer: usize,
     /// Bytes all streams' arriving messages may hold together (receive buffers and decoded
     /// copies: twice a message's length, plus `2 × max_message_bytes` for a compressed one). A
     /// message that does not fit ends its stream with RESOURCE_EXHAUSTED
@@ -202,6 +209,7 @@ impl Default for GrpcConfig {
             keepalive_timeout_s: 20.0,
             max_streams_per_connection: 32,
             max_streams: 4096,
+            max_streams_per_peer: 3072,
             arrival_bytes: 1 << 30,
         }
     }
@@ -682,6 +690,9 @@ impl Config {
             return bad(
                 "grpc.max_connections, grpc.max_streams_per_connection, grpc.max_streams and http.max_connections must be > 0",
             );
+        }
+        if g.max_streams_per_peer == 0 {
+            return bad("grpc.max_streams_per_peer must be > 0");
         }
         if !(seconds(g.idle_timeout_s)
             && seconds(self.http.idle_timeout_s)

@@ -271,6 +271,7 @@ async fn serve_grpc(
     ));
     let streams = Arc::new(StreamLimit::new(
         config.grpc.max_streams,
+        config.grpc.max_streams_per_peer,
         service.metrics().streams.clone(),
     ));
     let uavnav = UavNavServer::new(UavNavService::new(service, config.grpc.ack_buffer))

@@ -11,11 +11,21 @@
 //! naming `grpc.max_streams`, before any handler runs, and counted in
 //! `uavnav_grpc_streams_refused_total`; the open streams are the gauge `uavnav_grpc_streams_open`.
 //! The streams already open are not touched: a flood of new streams cannot take them down.
+//!
+//! One peer address may hold at most `grpc.max_streams_per_peer` of the slots (by default three
+//! quarters), so that a single host opening streams it never reads cannot lock every other
+//! client out: a call beyond its address's share is refused the same way, naming that key, and
+//! counted in `uavnav_grpc_streams_peer_refused_total`. The share is per IP address, not per
+//! principal: a peer without valid credentials is answered UNAUTHENTICATED before it reads a
+//! body, so it holds its slot only for that answer, while one host can present many
+//! connections.
 
+use std::collections::HashMap;
 use std::future::Future;
+use std::net::IpAddr;
 use std::pin::Pin;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 
 use bytes::Bytes;
@@ -27,6 +37,8 @@ use tonic::Status;
 use tonic::body::Body;
 use tonic::codegen::http::{Request, Response};
 
+use crate::security::tls::PeerInfo;
+
 /// The limit's metrics.
 #[derive(Debug, Clone, Default)]
 pub struct StreamMetrics {
@@ -34,6 +46,8 @@ pub struct StreamMetrics {
     pub open: Gauge,
     /// Calls answered with RESOURCE_EXHAUSTED because every slot was taken.
     pub refused: Counter,
+    /// Calls answered with RESOURCE_EXHAUSTED because their peer address held its share.
+    pub peer_refused: Counter,
 }
 
 impl StreamMetrics {
@@ -50,6 +64,11 @@ impl StreamMetrics {
             "gRPC calls answered with RESOURCE_EXHAUSTED because grpc.max_streams streams were open",
             m.refused.clone(),
         );
+        registry.register(
+            "grpc_streams_peer_refused",
+            "gRPC calls answered with RESOURCE_EXHAUSTED because their peer address held grpc.max_streams_per_peer streams",
+            m.peer_refused.clone(),
+        );
         m
     }
 }
@@ -58,39 +77,87 @@ impl StreamMetrics {
 #[derive(Debug)]
 pub struct StreamLimit {
     limit: usize,
+    per_peer: usize,
     open: AtomicUsize,
+    /// Open streams per peer address (entries removed at zero, so the map holds at most one
+    /// entry per open stream).
+    peers: Mutex<HashMap<IpAddr, usize>>,
     metrics: StreamMetrics,
 }
 
+/// Why a call found no slot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Refused {
+    /// Every slot of `grpc.max_streams` was taken.
+    Full,
+    /// The call's peer address held its share, `grpc.max_streams_per_peer`.
+    PeerShare,
+}
+
 impl StreamLimit {
-    /// A limit of `limit` streams (at least one).
-    pub fn new(limit: usize, metrics: StreamMetrics) -> Self {
+    /// A limit of `limit` streams (at least one), at most `per_peer` of them (at least one) from
+    /// one peer address.
+    pub fn new(limit: usize, per_peer: usize, metrics: StreamMetrics) -> Self {
         Self {
             limit: limit.max(1),
+            per_peer: per_peer.clamp(1, limit.max(1)),
             open: AtomicUsize::new(0),
+            peers: Mutex::new(HashMap::new()),
             metrics,
         }
     }
 
-    /// Takes a slot, if one is free.
-    pub fn try_open(self: &Arc<Self>) -> Option<StreamSlot> {
+    /// Takes a slot for a call from `peer` (`None`: address unknown, only the total applies),
+    /// if one is free and the peer holds less than its share. A full service is reported as
+    /// such even to a peer at its share (the total is checked first).
+    pub fn try_open(self: &Arc<Self>, peer: Option<IpAddr>) -> Result<StreamSlot, Refused> {
         let mut n = self.open.load(Ordering::Relaxed);
         loop {
             if n >= self.limit {
                 self.metrics.refused.inc();
-                return None;
+                return Err(Refused::Full);
             }
             match self
                 .open
                 .compare_exchange_weak(n, n + 1, Ordering::AcqRel, Ordering::Relaxed)
             {
-                Ok(_) => {
-                    self.metrics.open.inc();
-                    return Some(StreamSlot(Arc::clone(self)));
-                }
+                Ok(_) => break,
                 Err(now) => n = now,
             }
         }
+        if let Some(ip) = peer {
+            let mut peers = self.peers.lock().unwrap_or_else(|e| e.into_inner());
+            let held = peers.entry(ip).or_insert(0);
+            if *held >= self.per_peer {
+                drop(peers);
+                self.open.fetch_sub(1, Ordering::AcqRel);
+                self.metrics.peer_refused.inc();
+                return Err(Refused::PeerShare);
+            }
+            *held += 1;
+        }
+        self.metrics.open.inc();
+        Ok(StreamSlot {
+            limit: Arc::clone(self),
+            peer,
+        })
+    }
+
+    /// Gives back one of `ip`'s streams.
+    fn release_peer(&self, ip: IpAddr) {
+        let mut peers = self.peers.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(held) = peers.get_mut(&ip) {
+            *held = held.saturating_sub(1);
+            if *held == 0 {
+                peers.remove(&ip);
+            }
+        }
+    }
+
+    /// Streams `ip` holds now.
+    pub fn open_from(&self, ip: IpAddr) -> usize {
+        let peers = self.peers.lock().unwrap_or_else(|e| e.into_inner());
+        peers.get(&ip).copied().unwrap_or(0)
     }
 
     /// Streams open now.
@@ -98,23 +165,37 @@ impl StreamLimit {
         self.open.load(Ordering::Relaxed)
     }
 
-    /// The refusal a call gets when no slot is free.
-    fn refusal(&self) -> Status {
-        Status::resource_exhausted(format!(
-            "{} gRPC streams are open, the service's limit (grpc.max_streams); retry later",
-            self.limit
-        ))
+    /// The refusal a call gets when no slot is free for it.
+    fn refusal(&self, why: Refused) -> Status {
+        match why {
+            Refused::Full => Status::resource_exhausted(format!(
+                "{} gRPC streams are open, the service's limit (grpc.max_streams); retry later",
+                self.limit
+            )),
+            Refused::PeerShare => Status::resource_exhausted(format!(
+                "this peer address has {} gRPC streams open, its share of the service's \
+                 (grpc.max_streams_per_peer); close some or retry later",
+                self.per_peer
+            )),
+        }
     }
 }
 
 /// One open stream's slot, given back when dropped.
 #[derive(Debug)]
-pub struct StreamSlot(Arc<StreamLimit>);
+pub struct StreamSlot {
+    limit: Arc<StreamLimit>,
+    peer: Option<IpAddr>,
+}
 
 impl Drop for StreamSlot {
     fn drop(&mut self) {
-        self.0.open.fetch_sub(1, Ordering::AcqRel);
-        self.0.metrics.open.dec();
+        let Self { limit, peer } = self;
+        limit.open.fetch_sub(1, Ordering::AcqRel);
+        limit.metrics.open.dec();
+        if let Some(ip) = peer {
+            limit.release_peer(*ip);
+        }
     }
 }
 
@@ -175,9 +256,17 @@ where
     }
 
     fn call(&mut self, req: Request<Body>) -> Self::Future {
-        let Some(slot) = self.limit.try_open() else {
-            let refusal = self.limit.refusal().into_http::<Body>();
-            return Box::pin(std::future::ready(Ok(refusal)));
+        let peer = req
+            .extensions()
+            .get::<PeerInfo>()
+            .and_then(|p| p.remote)
+            .map(|a| a.ip().to_canonical());
+        let slot = match self.limit.try_open(peer) {
+            Ok(slot) => slot,
+            Err(why) => {
+                let refusal = self.limit.refusal(why).into_http::<Body>();
+                return Box::pin(std::future::ready(Ok(refusal)));
+            }
         };
         let fut = self.inner.call(req);
         Box::pin(async move {
@@ -194,23 +283,46 @@ mod tests {
     use tower::{Service, ServiceExt};
 
     fn limit(n: usize) -> Arc<StreamLimit> {
-        Arc::new(StreamLimit::new(n, StreamMetrics::default()))
+        Arc::new(StreamLimit::new(n, n, StreamMetrics::default()))
     }
 
     #[test]
     fn slots_are_counted_refused_beyond_the_limit_and_given_back() {
         let l = limit(2);
-        let a = l.try_open().expect("first");
-        let b = l.try_open().expect("second");
-        assert!(l.try_open().is_none());
+        let a = l.try_open(None).expect("first");
+        let b = l.try_open(None).expect("second");
+        assert_eq!(l.try_open(None).err(), Some(Refused::Full));
         assert_eq!(l.metrics.refused.get(), 1);
         assert_eq!(l.metrics.open.get(), 2);
         drop(a);
         assert_eq!(l.open(), 1);
-        let _c = l.try_open().expect("a slot was given back");
+        let _c = l.try_open(None).expect("a slot was given back");
         drop(b);
         assert_eq!(l.open(), 1);
         assert_eq!(l.metrics.open.get(), 1);
+    }
+
+    #[test]
+    fn one_peer_address_holds_at_most_its_share_and_the_others_get_the_rest() {
+        let l = Arc::new(StreamLimit::new(4, 3, StreamMetrics::default()));
+        let (greedy, other): (IpAddr, IpAddr) = ([10, 0, 0, 1].into(), [10, 0, 0, 2].into());
+        let held: Vec<_> = (0..3)
+            .map(|_| l.try_open(Some(greedy)).expect("within the share"))
+            .collect();
+        assert_eq!(l.try_open(Some(greedy)).err(), Some(Refused::PeerShare));
+        assert_eq!(l.metrics.peer_refused.get(), 1);
+        assert_eq!(l.open_from(greedy), 3);
+        // The slot left is another peer's to take; after it every slot is taken.
+        let o = l.try_open(Some(other)).expect("the slot the share leaves");
+        assert_eq!(l.try_open(Some(other)).err(), Some(Refused::Full));
+        assert_eq!(l.metrics.refused.get(), 1);
+        // A refusal for a full service takes nothing from the peer's count.
+        assert_eq!(l.open_from(other), 1);
+        drop(held);
+        assert_eq!((l.open(), l.open_from(greedy)), (1, 0));
+        drop(o);
+        assert_eq!(l.open(), 0);
+        assert!(l.peers.lock().unwrap_or_else(|e| e.into_inner()).is_empty());
     }
 
     #[tokio::test]

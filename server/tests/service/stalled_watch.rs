@@ -108,3 +108,66 @@ async fn open_streams_are_bounded_across_connections_and_refusals_counted() {
     assert_eq!(streams.refused.get(), refused_so_far);
     server.shutdown().await.unwrap();
 }
+
+/// One host that opens streams and never reads them takes at most its address's share,
+/// `grpc.max_streams_per_peer`, whatever the number of its connections: its further calls are
+/// refused with that key's name and counted, while a client from another address is still
+/// served from the slots the share leaves. (Both ends on loopback: the other client binds
+/// 127.0.0.2, which Linux routes to the same host.)
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn one_peer_address_cannot_take_every_stream_slot() {
+    let mut c = test_config();
+    c.grpc.max_streams = 6;
+    c.grpc.max_streams_per_peer = 4;
+    let server = start(c).await;
+    let streams = server.metrics().streams.clone();
+    let a = stalled_watch(server.grpc_addr, 4).await.expect("first");
+    let b = stalled_watch(server.grpc_addr, 4).await.expect("second");
+    assert_eq!(streams.open.get(), 4, "the greedy address holds its share");
+    assert_eq!(
+        streams.peer_refused.get(),
+        4,
+        "its second connection refused"
+    );
+    assert_eq!(streams.refused.get(), 0, "the service itself is not full");
+    // The same address again: refused at once, naming the key.
+    let status = client(&server)
+        .await
+        .list_vehicles(pb::ListVehiclesRequest::default())
+        .await
+        .expect_err("beyond the address's share");
+    assert_eq!(status.code(), tonic::Code::ResourceExhausted, "{status:?}");
+    assert!(
+        status.message().contains("grpc.max_streams_per_peer"),
+        "{status:?}"
+    );
+    // Another address is served.
+    let channel = tonic::transport::Endpoint::from_shared(format!("http://{}", server.grpc_addr))
+        .unwrap()
+        .local_address(Some([127, 0, 0, 2].into()))
+        .connect()
+        .await
+        .expect("a connection from 127.0.0.2");
+    uavnav_proto::v1::uav_nav_client::UavNavClient::new(channel)
+        .list_vehicles(pb::ListVehiclesRequest::default())
+        .await
+        .expect("another address is served");
+    let text = server.metrics().encode();
+    assert!(
+        text.contains("uavnav_grpc_streams_peer_refused_total 5"),
+        "{text}"
+    );
+    drop(a);
+    drop(b);
+    assert!(
+        eventually(Duration::from_secs(10), || streams.open.get() == 0).await,
+        "open streams after the peer left: {}",
+        streams.open.get()
+    );
+    client(&server)
+        .await
+        .list_vehicles(pb::ListVehiclesRequest::default())
+        .await
+        .expect("served again once its streams closed");
+    server.shutdown().await.unwrap();
+}
