@@ -92,21 +92,25 @@ async fn open_streams_are_bounded_across_connections_and_refusals_counted() {
         "{text}"
     );
     assert!(text.contains("uavnav_grpc_streams_open 6"), "{text}");
-    // The peers go away: their slots come back and calls are served.
-    drop(a);
-    drop(b);
+    served_again_once_they_leave(&server, vec![a, b]).await;
+    assert_eq!(streams.refused.get(), refused_so_far);
+    server.shutdown().await.unwrap();
+}
+
+/// The stalled peers go away: their slots come back, and a call is served again.
+async fn served_again_once_they_leave(server: &uavnavd::RunningServer, peers: Vec<StalledWatch>) {
+    let streams = server.metrics().streams.clone();
+    drop(peers);
     assert!(
         eventually(Duration::from_secs(10), || streams.open.get() == 0).await,
         "open streams after the peers left: {}",
         streams.open.get()
     );
-    client(&server)
+    client(server)
         .await
         .list_vehicles(pb::ListVehiclesRequest::default())
         .await
-        .expect("served again");
-    assert_eq!(streams.refused.get(), refused_so_far);
-    server.shutdown().await.unwrap();
+        .expect("served again once the streams closed");
 }
 
 /// One host that opens streams and never reads them takes at most its address's share,
@@ -157,17 +161,6 @@ async fn one_peer_address_cannot_take_every_stream_slot() {
         text.contains("uavnav_grpc_streams_peer_refused_total 5"),
         "{text}"
     );
-    drop(a);
-    drop(b);
-    assert!(
-        eventually(Duration::from_secs(10), || streams.open.get() == 0).await,
-        "open streams after the peer left: {}",
-        streams.open.get()
-    );
-    client(&server)
-        .await
-        .list_vehicles(pb::ListVehiclesRequest::default())
-        .await
-        .expect("served again once its streams closed");
+    served_again_once_they_leave(&server, vec![a, b]).await;
     server.shutdown().await.unwrap();
 }
