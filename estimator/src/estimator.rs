@@ -277,6 +277,14 @@ impl Estimator {
         }
     }
 
+    /// The `paper` profile's filters, when that profile runs (diagnostics and tests).
+    pub fn paper(&self) -> Option<&PaperFilter> {
+        match &self.profile {
+            Profile::Paper(p) => Some(p),
+            Profile::Eskf(_) => None,
+        }
+    }
+
     /// Forgets everything but the configuration and origin.
     pub fn reset(&mut self) {
         match &mut self.profile {

@@ -8,6 +8,7 @@
 use uavnav_core::rotation::wrap_pi;
 use uavnav_core::truth::truth_at;
 use uavnav_estimator::eskf::HeadingSource;
+use uavnav_estimator::paper::heading::BankState;
 use uavnav_estimator::{Estimator, EstimatorParams, PoseOutput};
 use uavnav_sim::{Flight, Scenario};
 
@@ -207,9 +208,11 @@ fn paper_profile_takes_a_multirotor_heading_from_the_yaw_bank() {
                     out.push(p);
                 }
             }
-            (out, est.health().yaw_resets)
+            let source = est.paper().unwrap().heading_source();
+            (out, (est.health().yaw_resets, source.state))
         };
-        let (poses, resets) = run_paper(EstimatorParams::default());
+        let (poses, (resets, state)) = run_paper(EstimatorParams::default());
+        assert_eq!(state, BankState::Active, "heading {heading}");
         let (within, max_after) = yaw_scores(&f, &poses, 30.0);
         eprintln!(
             "paper, heading {heading:6.1}: within 3 sigma {:.1} %, max |yaw error| after 30 s {:.2} deg, yaw resets {resets}",

@@ -93,12 +93,10 @@ impl BankHeading {
         }
     }
 
-    /// Back to the start (the filters restarted); the reset count is kept.
+    /// Back to the state of [`Self::new`] (the filters restarted).
     pub fn restart(&mut self) {
-        let resets = self.resets;
         let enabled = self.state != BankState::Off;
         *self = Self::new(*self.bank_params(), enabled);
-        self.resets = resets;
     }
 
     fn bank_params(&self) -> &YawEstimatorParams {

@@ -174,6 +174,12 @@ fn observe_imu_noise(
 impl PaperFilter {
     /// The three filters for one vehicle.
     pub fn new(config: &VehicleConfig, params: EstimatorParams, origin: Option<Lla>) -> Self {
+        let course_heading =
+            params.course_heading || config.airframe == uavnav_core::Airframe::FixedWing;
+        let heading = heading::BankHeading::new(
+            params.yaw_estimator,
+            params.paper_yaw_bank && !course_heading,
+        );
         let mut s = Self {
             params,
             lever_b: config
@@ -202,18 +208,12 @@ impl PaperFilter {
             gnss_att_diag: crate::aid_sources::InnovDiag::new(),
             fixes_without_velocity: 0,
             aligned: false,
-            course_heading: false,
+            course_heading,
             tilt_disagree: 0,
             divergence_resets: 0,
             gnss_tilt: gnss_tilt::GnssTilt::default(),
-            heading: heading::BankHeading::new(Default::default(), false),
+            heading,
         };
-        s.course_heading =
-            s.params.course_heading || config.airframe == uavnav_core::Airframe::FixedWing;
-        s.heading = heading::BankHeading::new(
-            s.params.yaw_estimator,
-            s.params.paper_yaw_bank && !s.course_heading,
-        );
         if let Some(o) = origin {
             s.set_frame(o);
         }
@@ -248,7 +248,6 @@ impl PaperFilter {
         fresh.observed_psd = (0.0, 0.0);
         fresh.gnss_tilt = gnss_tilt::GnssTilt::default();
         fresh.heading.restart();
-        fresh.heading.resets = 0;
         *self = fresh;
         if let Some(o) = cfg_frame {
             self.set_frame(o);
@@ -297,15 +296,15 @@ impl PaperFilter {
             self.gyro_psd,
             self.accel_psd,
         );
+        let gyro = m.gyro - self.gnss_tilt.gyro_bias_radps();
         att.predict(
-            &(m.gyro - self.gnss_tilt.gyro_bias_radps()),
+            &gyro,
             &self.w_ie,
             dt_s,
             gyro_psd + self.params.paper_gyro_instability_psd,
             s.t_ns,
         );
-        self.heading
-            .add_imu(&(m.gyro - self.gnss_tilt.gyro_bias_radps()), &m.accel, dt_s);
+        self.heading.add_imu(&gyro, &m.accel, dt_s);
         let c = att.rotation();
         let att_var = att.p_euler().trace() / 3.0;
         let g = self
@@ -512,6 +511,12 @@ impl PaperFilter {
             });
         self.tilt_disagree = if far { self.tilt_disagree + 1 } else { 0 };
         self.tilt_disagree >= DIVERGED_FIXES
+    }
+
+    /// The heading from the yaw-hypothesis bank (`heading`, our addition): its state, test ratio
+    /// and resets (diagnostics and tests).
+    pub fn heading_source(&self) -> &heading::BankHeading {
+        &self.heading
     }
 
     /// Restarts after a detected divergence so far.
