@@ -391,6 +391,7 @@ async fn attacks_async() {
         cfg.grpc.max_streams = n;
     }
     let max_streams = cfg.grpc.max_streams as u64;
+    let max_streams_per_peer = cfg.grpc.max_streams_per_peer as u64;
     let budget = MemoryBudget::of(&cfg);
     println!("the formula for this configuration:\n{budget}");
     let (max_message, total_pixels, streams) = (
@@ -508,17 +509,22 @@ async fn attacks_async() {
         // What the formula allows this attack: its connections' windows, their streams (at most
         // `grpc.max_streams`: the rest are refused), its vehicles with full input queues, and
         // the output rings.
-        let admitted = (conns as u64 * u64::from(streams)).min(max_streams);
+        // All from one address: `grpc.max_streams_per_peer` applies too.
+        let admitted = (conns as u64 * u64::from(streams))
+            .min(max_streams)
+            .min(max_streams_per_peer);
         let allowed = conns as u64 * u64::from(uavnavd::budget::GRPC_CONNECTION_WINDOW)
             + admitted * uavnavd::budget::GRPC_STREAM_BYTES
             + vehicles as u64 * (uavnavd::budget::VEHICLE_BYTES + input_queue_bytes)
             + uavnavd::budget::output_ring_bytes();
         println!(
-            "  {n} stalled streams answered ({} refused by grpc.max_streams), {vehicles} \
+            "  {n} stalled streams answered ({} refused by grpc.max_streams, {} by \
+             grpc.max_streams_per_peer), {vehicles} \
              vehicles: {:.1} MiB above the baseline, against {:.1} MiB that the formula's terms \
              allow them ({conns} connections, {admitted} streams, {vehicles} vehicles, the output \
              rings); live in the allocator {:+.1} MiB",
             server.metrics().streams.refused.get(),
+            server.metrics().streams.peer_refused.get(),
             mib(grown),
             mib(allowed),
             (live_bytes() as f64 - live_before as f64) / f64::from(1u32 << 20),

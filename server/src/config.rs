@@ -186,8 +186,8 @@ pub struct GrpcConfig {
     /// together); beyond, a new call from it is answered with RESOURCE_EXHAUSTED and counted
     /// (`uavnav_grpc_streams_peer_refused_total`), so that one host cannot take every slot and
     /// lock the other clients out. A ground station feeding a whole fleet from one address needs
-    /// one stream per vehicle at most. At least 1; a value above `max_streams` leaves only that
-    /// total.
+    /// few: the client library spreads its vehicles over a handful of ingest streams. At least
+    /// 1; a value above `max_streams` leaves only that total.
     pub max_streams_per_peer: usize,
     /// Bytes all streams' arriving messages may hold together (receive buffers and decoded
     /// copies: twice a message's length, plus `2 × max_message_bytes` for a compressed one). A

@@ -24,7 +24,6 @@ use std::collections::HashMap;
 use std::future::Future;
 use std::net::IpAddr;
 use std::pin::Pin;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 
@@ -78,11 +77,18 @@ impl StreamMetrics {
 pub struct StreamLimit {
     limit: usize,
     per_peer: usize,
-    open: AtomicUsize,
-    /// Open streams per peer address (entries removed at zero, so the map holds at most one
-    /// entry per open stream).
-    peers: Mutex<HashMap<IpAddr, usize>>,
+    /// Taken once per call (not per message), so one lock over both counts is cheap and keeps
+    /// them consistent without a give-back path.
+    counts: Mutex<Counts>,
     metrics: StreamMetrics,
+}
+
+/// Open streams, in all and per peer address.
+#[derive(Debug, Default)]
+struct Counts {
+    open: usize,
+    /// Entries are removed at zero, so the map holds at most one entry per open stream.
+    peers: HashMap<IpAddr, usize>,
 }
 
 /// Why a call found no slot.
@@ -101,41 +107,33 @@ impl StreamLimit {
         Self {
             limit: limit.max(1),
             per_peer: per_peer.clamp(1, limit.max(1)),
-            open: AtomicUsize::new(0),
-            peers: Mutex::new(HashMap::new()),
+            counts: Mutex::new(Counts::default()),
             metrics,
         }
+    }
+
+    fn counts(&self) -> std::sync::MutexGuard<'_, Counts> {
+        self.counts.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     /// Takes a slot for a call from `peer` (`None`: address unknown, only the total applies),
     /// if one is free and the peer holds less than its share. A full service is reported as
     /// such even to a peer at its share (the total is checked first).
     pub fn try_open(self: &Arc<Self>, peer: Option<IpAddr>) -> Result<StreamSlot, Refused> {
-        let mut n = self.open.load(Ordering::Relaxed);
-        loop {
-            if n >= self.limit {
-                self.metrics.refused.inc();
-                return Err(Refused::Full);
-            }
-            match self
-                .open
-                .compare_exchange_weak(n, n + 1, Ordering::AcqRel, Ordering::Relaxed)
-            {
-                Ok(_) => break,
-                Err(now) => n = now,
-            }
+        let mut c = self.counts();
+        if c.open >= self.limit {
+            self.metrics.refused.inc();
+            return Err(Refused::Full);
         }
         if let Some(ip) = peer {
-            let mut peers = self.peers.lock().unwrap_or_else(|e| e.into_inner());
-            let held = peers.entry(ip).or_insert(0);
+            let held = c.peers.entry(ip).or_insert(0);
             if *held >= self.per_peer {
-                drop(peers);
-                self.open.fetch_sub(1, Ordering::AcqRel);
                 self.metrics.peer_refused.inc();
                 return Err(Refused::PeerShare);
             }
             *held += 1;
         }
+        c.open += 1;
         self.metrics.open.inc();
         Ok(StreamSlot {
             limit: Arc::clone(self),
@@ -143,26 +141,14 @@ impl StreamLimit {
         })
     }
 
-    /// Gives back one of `ip`'s streams.
-    fn release_peer(&self, ip: IpAddr) {
-        let mut peers = self.peers.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(held) = peers.get_mut(&ip) {
-            *held = held.saturating_sub(1);
-            if *held == 0 {
-                peers.remove(&ip);
-            }
-        }
-    }
-
     /// Streams `ip` holds now.
     pub fn open_from(&self, ip: IpAddr) -> usize {
-        let peers = self.peers.lock().unwrap_or_else(|e| e.into_inner());
-        peers.get(&ip).copied().unwrap_or(0)
+        self.counts().peers.get(&ip).copied().unwrap_or(0)
     }
 
     /// Streams open now.
     pub fn open(&self) -> usize {
-        self.open.load(Ordering::Relaxed)
+        self.counts().open
     }
 
     /// The refusal a call gets when no slot is free for it.
@@ -191,11 +177,17 @@ pub struct StreamSlot {
 impl Drop for StreamSlot {
     fn drop(&mut self) {
         let Self { limit, peer } = self;
-        limit.open.fetch_sub(1, Ordering::AcqRel);
-        limit.metrics.open.dec();
-        if let Some(ip) = peer {
-            limit.release_peer(*ip);
+        let mut c = limit.counts();
+        c.open = c.open.saturating_sub(1);
+        if let Some(ip) = peer
+            && let Some(held) = c.peers.get_mut(ip)
+        {
+            *held = held.saturating_sub(1);
+            if *held == 0 {
+                c.peers.remove(ip);
+            }
         }
+        limit.metrics.open.dec();
     }
 }
 
@@ -322,7 +314,7 @@ mod tests {
         assert_eq!((l.open(), l.open_from(greedy)), (1, 0));
         drop(o);
         assert_eq!(l.open(), 0);
-        assert!(l.peers.lock().unwrap_or_else(|e| e.into_inner()).is_empty());
+        assert!(l.counts().peers.is_empty());
     }
 
     #[tokio::test]
