@@ -38,6 +38,13 @@ fn run(f: &Flight) -> (Vec<PoseOutput>, HeadingSource) {
 /// [`run`] with the vehicle configuration given.
 fn run_with(f: &Flight, config: &uavnav_core::VehicleConfig) -> (Vec<PoseOutput>, HeadingSource) {
     let mut est = Estimator::new(config, EstimatorParams::default(), Some(f.origin()));
+    let out = fly(&mut est, f);
+    let src = est.eskf().unwrap().heading_source();
+    (out, src)
+}
+
+/// Feeds every sensor of the flight in time order; returns the poses.
+fn fly(est: &mut Estimator, f: &Flight) -> Vec<PoseOutput> {
     let (mut g, mut m, mut b) = (0, 0, 0);
     let mut out = Vec::new();
     for s in f.imu() {
@@ -57,8 +64,7 @@ fn run_with(f: &Flight, config: &uavnav_core::VehicleConfig) -> (Vec<PoseOutput>
             out.push(p);
         }
     }
-    let src = est.eskf().unwrap().heading_source();
-    (out, src)
+    out
 }
 
 /// (fraction of poses with |yaw error| ≤ 3σ, max |yaw error| after `after_s`, rad).
@@ -198,16 +204,7 @@ fn paper_profile_takes_a_multirotor_heading_from_the_yaw_bank() {
         config.profile = uavnav_core::FilterProfile::Paper;
         let run_paper = |params: EstimatorParams| {
             let mut est = Estimator::new(&config, params, Some(f.origin()));
-            let (mut g, mut out) = (0, Vec::new());
-            for s in f.imu() {
-                while g < f.gnss().len() && f.gnss()[g].t_ns <= s.t_ns {
-                    est.push_gnss(&f.gnss()[g]).unwrap();
-                    g += 1;
-                }
-                if let Some(p) = est.push_imu(s).unwrap() {
-                    out.push(p);
-                }
-            }
+            let out = fly(&mut est, &f);
             let source = est.paper().unwrap().heading_source();
             (out, (est.health().yaw_resets, source.state))
         };
