@@ -90,6 +90,12 @@ pub struct EstimatorParams {
     /// 1e-7) makes the gyro-integrated attitude overconfident, so that the video pseudo-attitude
     /// and the lever-arm GNSS hardly correct it.
     pub paper_gyro_instability_psd: f64,
+    /// Paper profile: 1-σ per axis of the gyro bias left after start-up when the IMU
+    /// configuration states none (`ImuConfig::gyro_bias_sigma_radps` = 0, as for flight logs),
+    /// rad/s. VIDEO-IMU(1) grows its attitude covariance by what such a bias builds up
+    /// (`paper::attitude::AttitudeEkf::predict`). The same prior as the `eskf` bias states start
+    /// from (`init_gyro_bias_sigma_radps`): there it is then estimated, here it stays.
+    pub paper_unknown_gyro_bias_sigma_radps: f64,
     /// Paper profile: correlation time of the attitude error as the position/velocity filters see
     /// it through the specific force, s. The paper's split into an attitude filter and
     /// position/velocity filters drops their cross-covariance, so the attitude's uncertainty
@@ -207,6 +213,7 @@ impl Default for EstimatorParams {
             use_vision_translation: true,
             vision_joint_update: true,
             paper_gyro_instability_psd: 7e-7,
+            paper_unknown_gyro_bias_sigma_radps: 1e-3,
             paper_attitude_error_tau_s: 60.0,
             paper_video_start_sigma_rad: 0.5f64.to_radians(),
             paper_chain_cov_scale: 6.0,

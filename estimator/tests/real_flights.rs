@@ -165,7 +165,7 @@ fn paper_profile_never_diverges_silently() {
         assert_eq!(s.bad_sigma_rows, 0, "{name}: {s}");
         // Roll and pitch follow the flown attitude. Guards of the figures with roll and pitch
         // aided by the GNSS acceleration (`paper::gnss_tilt`) and the heading from the yaw bank
-        // (`paper::heading`): copters 0.74/1.19° and 2.65/2.32°, the plane 5.03/4.78° (without
+        // (`paper::heading`): copters 0.66/1.08° and 2.70/2.29°, the plane 5.02/4.76° (without
         // the bank 1.15/1.38°, 2.76/2.37°, 4.82/5.82°; without either and the trim 1.37/1.68°,
         // 4.13/3.81° and 6.69/9.00°).
         let bound = if name == "erle_plane_E" { 7.5 } else { 3.5 };

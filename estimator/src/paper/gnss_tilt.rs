@@ -314,7 +314,7 @@ mod tests {
         for k in 1..=30_000i64 {
             let t_ns = k * 10_000_000;
             let gyro = bias - src.gyro_bias_radps();
-            att.predict(&gyro, &Vector3::zeros(), 0.01, 1e-7, t_ns);
+            att.predict(&gyro, &Vector3::zeros(), 0.01, 1e-7, 0.0, t_ns);
             src.add_imu(&att.rotation(), &f_b, 1e-4, 0.01);
             if k % 20 == 0 {
                 let fix = TiltFix {

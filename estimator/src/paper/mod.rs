@@ -93,6 +93,9 @@ pub struct PaperFilter {
     lever_b: Vector3<f64>,
     body_from_cam: Option<Isometry3<f64>>,
     gyro_psd: f64,
+    /// The IMU's turn-on gyro bias σ, rad/s (`paper_unknown_gyro_bias_sigma_radps` when the
+    /// configuration states none): see `AttitudeEkf::predict`.
+    gyro_bias_sigma_radps: f64,
     accel_psd: f64,
     /// Gyro and accelerometer noise PSDs the data itself shows (see `observe_imu_noise`),
     /// smoothed over [`OBSERVED_NOISE_WINDOW_S`].
@@ -180,6 +183,10 @@ impl PaperFilter {
             params.yaw_estimator,
             params.paper_yaw_bank && !course_heading,
         );
+        let gyro_bias_sigma_radps = match config.imu.gyro_bias_sigma_radps {
+            s if s > 0.0 => s,
+            _ => params.paper_unknown_gyro_bias_sigma_radps,
+        };
         let mut s = Self {
             params,
             lever_b: config
@@ -188,6 +195,7 @@ impl PaperFilter {
                 .unwrap_or_else(Vector3::zeros),
             body_from_cam: config.camera.as_ref().map(|c| c.body_from_cam),
             gyro_psd: config.imu.gyro_noise_density.powi(2),
+            gyro_bias_sigma_radps,
             accel_psd: config.imu.accel_noise_density.powi(2),
             observed_psd: (0.0, 0.0),
             origin,
@@ -302,6 +310,7 @@ impl PaperFilter {
             &self.w_ie,
             dt_s,
             gyro_psd + self.params.paper_gyro_instability_psd,
+            self.gyro_bias_sigma_radps,
             s.t_ns,
         );
         self.heading.add_imu(&gyro, &m.accel, dt_s);
