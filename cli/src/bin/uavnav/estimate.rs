@@ -25,7 +25,8 @@ pub struct Args {
     /// Do not use the camera.
     #[arg(long)]
     pub no_vision: bool,
-    /// Do not use GNSS (inertial, plus vision when present).
+    /// Do not use GNSS. The filters start from a GNSS fix (position, velocity, local frame), so
+    /// with this flag a run writes no pose: a GNSS-free start is not built yet.
     #[arg(long)]
     pub no_gnss: bool,
     /// Do not use the magnetometer (the heading then comes from the yaw-hypothesis bank).
