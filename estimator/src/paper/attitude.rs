@@ -42,6 +42,10 @@ const HISTORY_NS: i64 = 2_000_000_000;
 /// rad².
 const PSEUDO_FLOOR_VAR: f64 = 1e-12;
 
+/// Largest 1-σ the gyro bias's share of an angle's error grows to, rad: that of an angle uniform
+/// round the circle (π/√3).
+const MAX_BIAS_SD_RAD: f64 = std::f64::consts::PI / 1.732_050_807_568_877_2;
+
 /// 6×6 covariance of `[δe; η]`.
 pub type AttCov = SMatrix<f64, 6, 6>;
 
@@ -137,14 +141,15 @@ impl AttitudeEkf {
     ) {
         let w_nb = gyro - self.rotation().transpose() * w_ie;
         let j = euler_rate_matrix(self.euler.x, self.euler.y);
-        // Eq. (S1); ‖J_i‖ is unbounded only at ±90° pitch, where the Euler angles are anyway.
+        // Eq. (S1); ‖J_i‖ is unbounded only at ±90° pitch, where the Euler angles are anyway. It
+        // stops at the σ of an angle uniform round the circle: an error cannot grow past that.
         let mut bias_var_growth = Vector3::zeros();
         for i in 0..3 {
-            let growth = gyro_bias_sigma_radps * j.row(i).norm() * dt_s;
-            if growth.is_finite() {
-                let sd = self.bias_sd[i];
-                bias_var_growth[i] = (2.0 * sd + growth) * growth;
-                self.bias_sd[i] = sd + growth;
+            let sd = self.bias_sd[i];
+            let next = (sd + gyro_bias_sigma_radps * j.row(i).norm() * dt_s).min(MAX_BIAS_SD_RAD);
+            if next.is_finite() && next > sd {
+                bias_var_growth[i] = next * next - sd * sd;
+                self.bias_sd[i] = next;
             }
         }
         // Linearized at the attitude at the start of the step, like the mean-value propagation.
@@ -611,5 +616,45 @@ mod tests {
         }
         assert_eq!(att.euler_at(5 * dt_ns - 1), before);
         assert!(att.euler.z > 1.0 + 0.009);
+    }
+
+    /// Eqs. (S1)–(S2): with no white noise, an unmeasured angle's σ grows linearly with a gyro
+    /// bias σ (as a constant bias's error does), a measurement removes its share of it, and it
+    /// never grows past that of an angle uniform round the circle.
+    #[test]
+    fn the_gyro_bias_share_grows_linearly_shrinks_with_a_measurement_and_is_bounded() {
+        let sigma_b = 1e-3;
+        let mut att = AttitudeEkf::new(Vector3::zeros(), Vector3::zeros(), 0);
+        let dt_s = 0.01;
+        let mut t_ns = 0;
+        let mut run = |att: &mut AttitudeEkf, seconds: f64| {
+            for _ in 0..(seconds / dt_s).round() as usize {
+                t_ns += 10_000_000;
+                let zero = Vector3::zeros();
+                att.predict(&zero, &zero, dt_s, 0.0, sigma_b, t_ns);
+            }
+        };
+        run(&mut att, 50.0);
+        let yaw_sd = |att: &AttitudeEkf| att.p_euler()[(2, 2)].sqrt();
+        assert!((yaw_sd(&att) - 0.05).abs() < 1e-6, "{}", yaw_sd(&att));
+        run(&mut att, 50.0);
+        assert!((yaw_sd(&att) - 0.1).abs() < 1e-6, "{}", yaw_sd(&att));
+        // A yaw measured to 0.01 rad: the posterior σ ≈ 0.00995; the bias's share shrinks by
+        // the same factor, so 10 s later σ ≈ 0.00995 + 0.01 (both parts grow together).
+        let mut diag = InnovDiag::new();
+        let (z, now_ns) = (att.euler, att.t_ns);
+        att.update_euler(&z, [None, None, Some(0.01)], 3.29, now_ns, &mut diag);
+        assert_eq!(diag.fused, 1);
+        let post = yaw_sd(&att);
+        assert!((post - 0.01 / 1.01f64.sqrt()).abs() < 1e-6, "{post}");
+        run(&mut att, 10.0);
+        assert!(
+            (yaw_sd(&att) - (post + 0.01)).abs() < 1e-4,
+            "{}",
+            yaw_sd(&att)
+        );
+        // A day unaided: bounded.
+        run(&mut att, 3000.0);
+        assert!(yaw_sd(&att) <= MAX_BIAS_SD_RAD + 1e-3, "{}", yaw_sd(&att));
     }
 }
