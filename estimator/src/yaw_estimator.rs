@@ -427,21 +427,14 @@ impl YawEstimator {
     /// under 1 m/s, or lie tipped over after a crash, showed 1.3–2.5 m/s² RMS of specific force
     /// and claimed 4–10° while 20–40° off the autopilot's compass heading.
     pub fn observability_sigma_rad(&self) -> f64 {
-        let a2 = match (self.accel_ms, self.kin_ms) {
-            (Some(f2), Some(k2)) => f2.min(k2),
-            _ => return std::f64::consts::FRAC_PI_2,
-        };
-        self.params
-            .persistent_accel_sigma_mps2
-            .atan2(a2.max(0.0).sqrt())
+        self.hidden_heading_rad(self.accel_ms.zip(self.kin_ms).map(|(f2, k2)| f2.min(k2)))
     }
 
-    /// The same bound from the specific force alone, rad: what decides whether GNSS velocities
-    /// may correct the heading ([`Self::heading_unobservable`]).
-    fn specific_force_observability_sigma_rad(&self) -> f64 {
+    /// `atan(b / a_rms)` for a mean-square acceleration `a2`; π/2 when there is none yet.
+    fn hidden_heading_rad(&self, a2: Option<f64>) -> f64 {
         let b = self.params.persistent_accel_sigma_mps2;
-        self.accel_ms.map_or(std::f64::consts::FRAC_PI_2, |f2| {
-            b.atan2(f2.max(0.0).sqrt())
+        a2.map_or(std::f64::consts::FRAC_PI_2, |a2| {
+            b.atan2(a2.max(0.0).sqrt())
         })
     }
 
@@ -517,7 +510,7 @@ impl YawEstimator {
     /// weighs them with its own σ (copter_218 without its compass: yaw RMSE 9.4° against 10.9°
     /// when the corrections stopped on the smaller view).
     pub fn heading_unobservable(&self) -> bool {
-        self.specific_force_observability_sigma_rad() > self.params.converged_sigma_rad
+        self.hidden_heading_rad(self.accel_ms) > self.params.converged_sigma_rad
     }
 
     /// The σ a heading seen only through the GNSS velocity can honestly claim, rad: the bank's

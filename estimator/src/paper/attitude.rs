@@ -43,8 +43,8 @@ const HISTORY_NS: i64 = 2_000_000_000;
 const PSEUDO_FLOOR_VAR: f64 = 1e-12;
 
 /// Largest 1-σ the gyro bias's share of an angle's error grows to, rad: that of an angle uniform
-/// round the circle (π/√3).
-const MAX_BIAS_SD_RAD: f64 = std::f64::consts::PI / 1.732_050_807_568_877_2;
+/// round the circle (π/√3), as for a heading not yet known.
+const MAX_BIAS_SD_RAD: f64 = crate::init::UNALIGNED_YAW_SIGMA_RAD;
 
 /// 6×6 covariance of `[δe; η]`.
 pub type AttCov = SMatrix<f64, 6, 6>;
