@@ -37,7 +37,8 @@ pub fn csv_row(p: &pb::PoseEstimate) -> Option<String> {
     ))
 }
 
-/// One TUM line in the local NED frame `frame` (no newline).
+/// One TUM line in the local NED frame `frame` (no newline); `None` also for an attitude-only
+/// pose.
 pub fn tum_line(p: &pb::PoseEstimate, frame: &LocalFrame) -> Option<String> {
-    to_output(p, Some(frame)).map(|o| uavnav_dataset::poses::tum_line(&o))
+    to_output(p, Some(frame)).and_then(|o| uavnav_dataset::poses::tum_line(&o))
 }

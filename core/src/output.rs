@@ -65,17 +65,29 @@ pub enum Mode {
     InertialOnly,
     /// Non-finite state or covariance beyond the divergence bounds.
     Diverged,
+    /// Started without a GNSS fix and nothing has given a position since: roll and pitch are
+    /// held by gravity, the heading by the magnetometer when there is one; position and
+    /// velocity are not estimated (absent on the wire and empty in `poses.csv`; the fields of
+    /// [`PoseOutput`] then hold the filter's internal hold point and mean nothing).
+    AttitudeOnly,
 }
 
 impl Mode {
     /// Every mode, in wire order.
-    pub const ALL: [Mode; 5] = [
+    pub const ALL: [Mode; 6] = [
         Mode::Initialising,
         Mode::Nominal,
         Mode::GnssDeniedVision,
         Mode::InertialOnly,
         Mode::Diverged,
+        Mode::AttitudeOnly,
     ];
+
+    /// Whether position and velocity are estimated in this mode (all but
+    /// [`Mode::AttitudeOnly`]).
+    pub fn has_position(self) -> bool {
+        self != Mode::AttitudeOnly
+    }
 
     /// Name for CSV columns and logs.
     pub fn as_str(self) -> &'static str {
@@ -85,6 +97,7 @@ impl Mode {
             Mode::GnssDeniedVision => "gnss_denied_vision",
             Mode::InertialOnly => "inertial_only",
             Mode::Diverged => "diverged",
+            Mode::AttitudeOnly => "attitude_only",
         }
     }
 }

@@ -15,21 +15,37 @@ pub fn csv_header() -> String {
 }
 
 /// One `poses.csv` row (no newline): degrees at this edge, altitude above the ellipsoid, the
-/// quaternion `nav_from_body` (w first), ZYX Euler angles.
+/// quaternion `nav_from_body` (w first), ZYX Euler angles. In a mode without position
+/// ([`uavnav_core::Mode::AttitudeOnly`]) the position, velocity and position-σ cells are empty.
 pub fn csv_row(o: &PoseOutput) -> String {
     let q = o.nav_from_body.quaternion();
     let e = o.euler_rad.map(f64::to_degrees);
     let se = o.sigma_att_rad.map(f64::to_degrees);
     let h = &o.health;
+    let position = if h.mode.has_position() {
+        format!(
+            "{:.9},{:.9},{:.4},{:.5},{:.5},{:.5}",
+            o.lla.lat_deg(),
+            o.lla.lon_deg(),
+            o.lla.alt_m,
+            o.vel_ned_mps.x,
+            o.vel_ned_mps.y,
+            o.vel_ned_mps.z,
+        )
+    } else {
+        ",,,,,".to_owned()
+    };
+    let sigma_pos = if h.mode.has_position() {
+        format!(
+            "{:.4},{:.4},{:.4}",
+            o.sigma_pos_ned_m.x, o.sigma_pos_ned_m.y, o.sigma_pos_ned_m.z,
+        )
+    } else {
+        ",,".to_owned()
+    };
     format!(
-        "{},{:.9},{:.9},{:.4},{:.5},{:.5},{:.5},{:.9},{:.9},{:.9},{:.9},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{:.5},{:.5},{:.5},{},{:.4},{:.4},{:.4},{:.4},{},{},{}",
+        "{},{position},{:.9},{:.9},{:.9},{:.9},{:.5},{:.5},{:.5},{sigma_pos},{:.5},{:.5},{:.5},{},{:.4},{:.4},{:.4},{:.4},{},{},{}",
         o.t_ns,
-        o.lla.lat_deg(),
-        o.lla.lon_deg(),
-        o.lla.alt_m,
-        o.vel_ned_mps.x,
-        o.vel_ned_mps.y,
-        o.vel_ned_mps.z,
         q.w,
         q.i,
         q.j,
@@ -37,9 +53,6 @@ pub fn csv_row(o: &PoseOutput) -> String {
         e.x,
         e.y,
         e.z,
-        o.sigma_pos_ned_m.x,
-        o.sigma_pos_ned_m.y,
-        o.sigma_pos_ned_m.z,
         se.x,
         se.y,
         se.z,
@@ -55,10 +68,14 @@ pub fn csv_row(o: &PoseOutput) -> String {
 }
 
 /// One TUM line `t_s x y z qx qy qz qw` (no newline): time in s, position in the estimator's local
-/// NED frame (its origin is the first GNSS fix unless an origin was given), `nav_from_body`.
-pub fn tum_line(o: &PoseOutput) -> String {
+/// NED frame (its origin is the first GNSS fix unless an origin was given), `nav_from_body`;
+/// `None` in a mode without position (a trajectory line needs one).
+pub fn tum_line(o: &PoseOutput) -> Option<String> {
+    if !o.health.mode.has_position() {
+        return None;
+    }
     let q = o.nav_from_body.quaternion();
-    format!(
+    Some(format!(
         "{:.9} {:.4} {:.4} {:.4} {:.9} {:.9} {:.9} {:.9}",
         o.t_ns as f64 * 1e-9,
         o.pos_ned_m.x,
@@ -68,5 +85,5 @@ pub fn tum_line(o: &PoseOutput) -> String {
         q.j,
         q.k,
         q.w
-    )
+    ))
 }

@@ -34,6 +34,7 @@ fn csv_and_tum_lines() {
     assert_eq!(f[0], "1500000000");
     assert!((f[11].parse::<f64>().unwrap() - 0.1f64.to_degrees()).abs() < 1e-4);
     let tum: Vec<f64> = tum_line(&o)
+        .expect("a pose with position")
         .split(' ')
         .map(|x| x.parse().unwrap())
         .collect();
@@ -41,4 +42,17 @@ fn csv_and_tum_lines() {
     assert!((tum[0] - 1.5).abs() < 1e-12 && (tum[3] + 3.0).abs() < 1e-12);
     let q = o.nav_from_body.quaternion();
     assert!((tum[7] - q.w).abs() < 1e-9 && (tum[4] - q.i).abs() < 1e-9);
+
+    // Attitude only: the position, velocity and position-σ cells are empty, the rest is there,
+    // and there is no trajectory line.
+    let mut a = o;
+    a.health.mode = uavnav_core::Mode::AttitudeOnly;
+    let row = csv_row(&a);
+    let f: Vec<&str> = row.split(',').collect();
+    assert_eq!(f.len(), header.split(',').count());
+    assert!(f[1..7].iter().all(|c| c.is_empty()), "{row}");
+    assert!(f[14..17].iter().all(|c| c.is_empty()), "{row}");
+    assert!((f[11].parse::<f64>().unwrap() - 0.1f64.to_degrees()).abs() < 1e-4);
+    assert!(!f[17].is_empty() && f[20] == "attitude_only", "{row}");
+    assert!(tum_line(&a).is_none());
 }

@@ -131,6 +131,96 @@ impl Initialiser {
     }
 }
 
+/// σ of the velocity at a start without GNSS, m/s: the vehicle is taken to be about still
+/// (a hover or the ground); the position hold then keeps it near zero whatever it does.
+pub const GNSSLESS_START_VEL_SIGMA_MPS: f64 = 1.0;
+
+/// Largest mean gyro over the levelling window taken as the gyro's bias at a start without
+/// GNSS, rad/s (5.7 °/s): a vehicle starts its stream at rest, on the ground or held, and its
+/// motors' vibration averages out of the mean while a MEMS turn-on bias does not (EuRoC's
+/// ADIS16448 on an idling MAV: 0.08 rad/s about one axis, spread 0.06 rad/s per sample);
+/// anything faster is a turn.
+pub const START_BIAS_MAX_RADPS: f64 = 0.1;
+
+impl Initialiser {
+    /// Starts without a GNSS fix, at `p_ned` (the hold point) with zero velocity, levelled on the
+    /// mean specific force taken as gravity alone (no GNSS to measure an acceleration): a tilt σ
+    /// of `init_tilt_sigma_rad` plus what the window's departure from 1 g and its spread allow
+    /// (a vehicle already manoeuvring at the start). Heading unknown. `None` until the levelling
+    /// window is full, or in free fall.
+    pub fn try_init_at_rest(
+        &self,
+        t_ns: i64,
+        p_ned: &Vector3<f64>,
+        g_n: &Vector3<f64>,
+        params: &EstimatorParams,
+        pos_sigma_m: f64,
+    ) -> Option<InitResult> {
+        let (t_first, t_last) = (self.samples.front()?.0, self.samples.back()?.0);
+        if ((t_last - t_first) as f64) < 0.8 * params.init_level_window_s * 1e9 {
+            return None;
+        }
+        let n = self.samples.len() as f64;
+        let f_b = self.samples.iter().map(|s| s.2).sum::<Vector3<f64>>() / n;
+        let spread = (self
+            .samples
+            .iter()
+            .map(|s| (s.2 - f_b).norm_squared())
+            .sum::<f64>()
+            / n)
+            .sqrt();
+        let q = attitude_from_gravity(&f_b, g_n, 0.0)?;
+        let g = g_n.norm();
+        let unlevel = (((f_b.norm() - g).abs() + spread) / g).min(1.0).asin();
+        // Standing still, the mean gyro is its bias (the Earth rate, 7e-5 rad/s, left in): with
+        // GNSS the bias is learnt from the velocity in seconds, without it only slowly through
+        // the tilt, and a MEMS turn-on bias of a few °/s would tilt the attitude by tens of
+        // degrees first (EuRoC's IMU: 0.08 rad/s about one axis).
+        let w_b = self.samples.iter().map(|s| s.1).sum::<Vector3<f64>>() / n;
+        let gyro_spread = (self
+            .samples
+            .iter()
+            .map(|s| (s.1 - w_b).norm_squared())
+            .sum::<f64>()
+            / n)
+            .sqrt();
+        let still = w_b.norm() <= START_BIAS_MAX_RADPS;
+        // The mean's own noise, per axis.
+        let bias_sigma = if still {
+            params.init_gyro_bias_sigma_radps + gyro_spread / (3.0 * n).sqrt()
+        } else {
+            params.init_gyro_bias_sigma_radps
+        };
+        let mut cov = Cov::zeros();
+        for k in 0..3 {
+            cov[(IP + k, IP + k)] = pos_sigma_m.powi(2);
+            cov[(IV + k, IV + k)] = GNSSLESS_START_VEL_SIGMA_MPS.powi(2);
+            cov[(IBG + k, IBG + k)] = bias_sigma.powi(2);
+            cov[(IBA + k, IBA + k)] = params.init_accel_bias_sigma_mps2.powi(2);
+        }
+        set_attitude_cov(
+            &mut cov,
+            params.init_tilt_sigma_rad + unlevel,
+            UNALIGNED_YAW_SIGMA_RAD,
+        );
+        let x = Nominal {
+            t_ns,
+            p: *p_ned,
+            v: Vector3::zeros(),
+            q,
+            bg: if still { w_b } else { Vector3::zeros() },
+            ba: Vector3::zeros(),
+            gm: Vector3::zeros(),
+            clone: None,
+        };
+        Some(InitResult {
+            x,
+            p: cov,
+            yaw_aligned: false,
+        })
+    }
+}
+
 /// σ of an unknown vertical velocity at the alignment, m/s (a receiver that gives ground speed and
 /// course only): a climb or descent of a small UAV.
 pub const UNKNOWN_VERTICAL_VELOCITY_SIGMA_MPS: f64 = 3.0;

@@ -15,16 +15,18 @@ use crate::v1 as pb;
 /// per-pose health (the service sends those on its health stream).
 pub fn compact_pose(p: &PoseOutput) -> Pose {
     let aiding = aiding_to_wire(&p.aiding).fold(0, |bits, s| bits | Pose::aiding_bit(s));
+    // Position and velocity only where the mode estimates them.
+    let pv = p.health.mode.has_position();
     Pose {
         t_ns: p.t_ns,
-        position: Some((&p.lla).into()),
-        vel_ned_mps: Some((&p.vel_ned_mps).into()),
+        position: pv.then(|| (&p.lla).into()),
+        vel_ned_mps: pv.then(|| (&p.vel_ned_mps).into()),
         nav_from_body: Some((&p.nav_from_body).into()),
         roll_rad: p.euler_rad.x,
         pitch_rad: p.euler_rad.y,
         yaw_rad: p.euler_rad.z,
-        sigma_pos_ned_m: Some((&p.sigma_pos_ned_m).into()),
-        sigma_vel_ned_mps: Some((&p.sigma_vel_mps).into()),
+        sigma_pos_ned_m: pv.then(|| (&p.sigma_pos_ned_m).into()),
+        sigma_vel_ned_mps: pv.then(|| (&p.sigma_vel_mps).into()),
         sigma_att_rad: Some((&p.sigma_att_rad).into()),
         aiding,
         mode: mode_to_wire(p.health.mode),

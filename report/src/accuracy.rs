@@ -50,7 +50,7 @@ pub fn outage_drift(
     let last = outputs
         .iter()
         .rev()
-        .find(|o| o.t_ns < end_ns && o.t_ns >= start_ns)?;
+        .find(|o| o.t_ns < end_ns && o.t_ns >= start_ns && o.health.mode.has_position())?;
     let t = truth_at(truth, last.t_ns)?;
     let err = (last.pos_ned_m - t.pos_ned_m).xy().norm();
     let inside: Vec<&TruthSample> = truth
@@ -75,7 +75,7 @@ pub fn outage_drift(
 /// Consistency of the stated uncertainty.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Consistency {
-    /// Fraction of (sample, axis) position errors within 3σ.
+    /// Fraction of (sample, axis) position errors within 3σ (over the samples with a position).
     pub pos_within_3sigma: f64,
     /// Same for velocity.
     pub vel_within_3sigma: f64,
@@ -89,6 +89,8 @@ pub struct Consistency {
     pub mean_nees_att: f64,
     /// Samples evaluated.
     pub samples: usize,
+    /// Of those, the samples with a position and velocity (not [`uavnav_core::Mode::AttitudeOnly`]).
+    pub position_samples: usize,
 }
 
 /// 3σ fractions and mean (diagonal) NEES over outputs at or after `from_ns`.
@@ -100,25 +102,34 @@ pub fn consistency(outputs: &[PoseOutput], truth: &[TruthSample], from_ns: i64) 
         let Some(t) = truth_at(truth, o.t_ns) else {
             continue;
         };
-        let ep = o.pos_ned_m - t.pos_ned_m;
-        let ev = o.vel_ned_mps - t.vel_ned_mps;
         let ea = euler_error(&o.nav_from_body, &t.nav_from_body);
         for k in 0..3 {
-            in_p += usize::from(ep[k].abs() <= 3.0 * o.sigma_pos_ned_m[k]);
-            in_v += usize::from(ev[k].abs() <= 3.0 * o.sigma_vel_mps[k]);
             in_a += usize::from(ea[k].abs() <= 3.0 * o.sigma_att_rad[k]);
-            nees_p += (ep[k] / o.sigma_pos_ned_m[k].max(1e-12)).powi(2);
             nees_a += (ea[k] / o.sigma_att_rad[k].max(1e-12)).powi(2);
         }
         c.samples += 1;
+        if !o.health.mode.has_position() {
+            continue;
+        }
+        let ep = o.pos_ned_m - t.pos_ned_m;
+        let ev = o.vel_ned_mps - t.vel_ned_mps;
+        for k in 0..3 {
+            in_p += usize::from(ep[k].abs() <= 3.0 * o.sigma_pos_ned_m[k]);
+            in_v += usize::from(ev[k].abs() <= 3.0 * o.sigma_vel_mps[k]);
+            nees_p += (ep[k] / o.sigma_pos_ned_m[k].max(1e-12)).powi(2);
+        }
+        c.position_samples += 1;
     }
     if c.samples > 0 {
         let n = 3.0 * c.samples as f64;
-        c.pos_within_3sigma = in_p as f64 / n;
-        c.vel_within_3sigma = in_v as f64 / n;
+        let n_pv = 3.0 * c.position_samples as f64;
+        if c.position_samples > 0 {
+            c.pos_within_3sigma = in_p as f64 / n_pv;
+            c.vel_within_3sigma = in_v as f64 / n_pv;
+            c.mean_nees_pos = nees_p / c.position_samples as f64;
+        }
         c.att_within_3sigma = in_a as f64 / n;
-        c.all_within_3sigma = (in_p + in_v + in_a) as f64 / (3.0 * n);
-        c.mean_nees_pos = nees_p / c.samples as f64;
+        c.all_within_3sigma = (in_p + in_v + in_a) as f64 / (n + 2.0 * n_pv);
         c.mean_nees_att = nees_a / c.samples as f64;
     }
     c
@@ -137,7 +148,9 @@ pub struct AccuracyReport {
     pub consistency: Consistency,
 }
 
-/// Settling time excluded from the attitude and consistency figures, ns (the targets' "after 30 s").
+/// Settling time excluded from the attitude and consistency figures, ns (the targets' "after 30 s"),
+/// counted from the first output with a position (else the first output) or the truth's start,
+/// whichever is earlier.
 pub const SETTLE_NS: i64 = 30_000_000_000;
 
 impl AccuracyReport {
@@ -148,8 +161,12 @@ impl AccuracyReport {
         truth: &[TruthSample],
         outages: &[(i64, i64)],
     ) -> Self {
+        // From the first output with a position when there is one: a filter that ran attitude
+        // only before GNSS came settles from there, as one that waited for it.
         let t0 = outputs
-            .first()
+            .iter()
+            .find(|o| o.health.mode.has_position())
+            .or(outputs.first())
             .map(|o| o.t_ns)
             .unwrap_or(0)
             .min(truth.first().map(|t| t.t_ns).unwrap_or(0));
@@ -188,7 +205,7 @@ impl AccuracyReport {
             .collect();
         let c = &self.consistency;
         format!(
-            "{{\"label\":{:?},\"attitude_rmse_deg\":{},\"outages\":[{}],\"consistency\":{{\"pos_within_3sigma\":{:.4},\"vel_within_3sigma\":{:.4},\"att_within_3sigma\":{:.4},\"all_within_3sigma\":{:.4},\"mean_nees_pos\":{:.3},\"mean_nees_att\":{:.3},\"samples\":{}}}}}",
+            "{{\"label\":{:?},\"attitude_rmse_deg\":{},\"outages\":[{}],\"consistency\":{{\"pos_within_3sigma\":{:.4},\"vel_within_3sigma\":{:.4},\"att_within_3sigma\":{:.4},\"all_within_3sigma\":{:.4},\"mean_nees_pos\":{:.3},\"mean_nees_att\":{:.3},\"samples\":{},\"position_samples\":{}}}}}",
             self.label,
             att,
             outs.join(","),
@@ -198,7 +215,8 @@ impl AccuracyReport {
             c.all_within_3sigma,
             c.mean_nees_pos,
             c.mean_nees_att,
-            c.samples
+            c.samples,
+            c.position_samples
         )
     }
 

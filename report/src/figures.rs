@@ -148,11 +148,16 @@ fn run_series(
     for (i, o) in outs.iter().enumerate() {
         let t = seconds_since(t0_ns, o.t_ns);
         let angles = [o.euler_rad.x, o.euler_rad.y, yaw[i]];
+        let pv = o.health.mode.has_position();
         for (k, angle) in angles.iter().enumerate() {
             s.att_deg[k].push((t, angle.to_degrees()));
-            s.vel_mps[k].push((t, o.vel_ned_mps[k]));
+            if pv {
+                s.vel_mps[k].push((t, o.vel_ned_mps[k]));
+            }
         }
-        s.down_m.push((t, o.pos_ned_m.z));
+        if pv {
+            s.down_m.push((t, o.pos_ned_m.z));
+        }
         let Some(tr) = truth_at(truth, o.t_ns) else {
             continue;
         };
@@ -161,9 +166,11 @@ fn run_series(
             s.att_err_deg[k].push((t, e[k].to_degrees()));
             s.att_3sigma_deg[k].push((t, 3.0 * o.sigma_att_rad[k].to_degrees()));
         }
-        s.h_err_m
-            .push((t, (o.pos_ned_m - tr.pos_ned_m).xy().norm()));
-        s.h_3sigma_m.push((t, 3.0 * o.sigma_pos_ned_m.xy().norm()));
+        if pv {
+            s.h_err_m
+                .push((t, (o.pos_ned_m - tr.pos_ned_m).xy().norm()));
+            s.h_3sigma_m.push((t, 3.0 * o.sigma_pos_ned_m.xy().norm()));
+        }
     }
     s
 }

@@ -9,12 +9,13 @@ use crate::accuracy::{AccuracyReport, SETTLE_NS};
 use crate::error::ReportError;
 
 /// Every mode, in a fixed order (deterministic output).
-const MODES: [Mode; 5] = [
+const MODES: [Mode; 6] = [
     Mode::Initialising,
     Mode::Nominal,
     Mode::GnssDeniedVision,
     Mode::InertialOnly,
     Mode::Diverged,
+    Mode::AttitudeOnly,
 ];
 
 /// Metadata of one run: span, time share of each mode, and the final health counters.

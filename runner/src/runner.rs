@@ -173,7 +173,17 @@ impl VehicleRunner {
         params: RunnerParams,
         origin: Option<uavnav_core::Lla>,
     ) -> Self {
-        let estimator = Estimator::new(&config, params.estimator.clone(), origin);
+        // A run told to leave GNSS out is a vehicle without a receiver to the estimator (which
+        // then starts without waiting for a fix).
+        let estimator_config = if params.use_gnss {
+            config.clone()
+        } else {
+            VehicleConfig {
+                gnss: None,
+                ..config.clone()
+            }
+        };
+        let estimator = Estimator::new(&estimator_config, params.estimator.clone(), origin);
         let frontend = config
             .camera
             .as_ref()

@@ -8,6 +8,7 @@
 //! | [`gnss_pos`] | antenna position through the lever arm (paper eq. 32) + Gauss–Markov error |
 //! | [`gnss_vel`] | antenna velocity with the `C(ω×r)` term (paper eq. 33) |
 //! | [`mag_heading`] | magnetometer heading against the WMM2025 declination (eq. M1) |
+//! | [`position_hold`] | not a sensor: the hold point that bounds a filter without position aiding (eq. H1) |
 //! | [`vision`] | relative rotation and direction of travel / metric translation between frames |
 
 pub mod baro_height;
@@ -15,6 +16,7 @@ pub mod gnss_consistency;
 pub mod gnss_pos;
 pub mod gnss_vel;
 pub mod mag_heading;
+pub mod position_hold;
 pub mod vision;
 
 use nalgebra::{SMatrix, SVector};

@@ -322,7 +322,12 @@ impl Eskf {
     }
 
     pub(super) fn fuse_mag(&mut self, t_ns: i64, m_b: &Vector3<f64>) {
-        let Some((field, extra)) = self.model_field(t_ns) else {
+        let field = if self.frame_provisional {
+            self.own_field(m_b)
+        } else {
+            self.model_field(t_ns)
+        };
+        let Some((field, extra)) = field else {
             return;
         };
         let Some(x) = self.x else { return };

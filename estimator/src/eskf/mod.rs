@@ -6,10 +6,14 @@
 //! |---|---|
 //! | this file | the filter's state, horizon stepping, buffered events, GNSS, baro and vision fusion |
 //! | [`heading`] | the heading lifecycle ([`HeadingSource`]), magnetometer and yaw-bank alignment |
+//! | [`gnssless`] | the start without GNSS, attitude only until the first fix |
 //! | `report` | mode, health, the pose output, the motion prior for vision |
 
+mod gnssless;
 mod heading;
 mod report;
+
+pub use gnssless::provisional_frame;
 
 pub use heading::HeadingSource;
 
@@ -25,6 +29,7 @@ use crate::aid_sources::gnss_pos::{
 };
 use crate::aid_sources::gnss_vel::{GnssVelSource, LEVER_GYRO_HALF_WINDOW_NS, lever_gyro};
 use crate::aid_sources::mag_heading::MagHeadingSource;
+use crate::aid_sources::position_hold::PositionHold;
 use crate::aid_sources::vision::{PlaneScale, VisionSource, VisionUse};
 use crate::buffer::{DelayBuffer, Event, MAX_IMU_HISTORY};
 use crate::init::{Initialiser, hold_yaw_unknown};
@@ -111,6 +116,16 @@ pub struct Eskf {
     horizon_lag_ns: i64,
     corrected: bool,
     lla: Option<crate::output::LlaLinearizer>,
+    /// Running without GNSS (started from the IMU alone, no fix processed yet; `gnssless`).
+    gnssless: bool,
+    /// The frame is the provisional one of a filter that does not know where it is.
+    frame_provisional: bool,
+    /// A GNSS fix has been pushed: the filter starts from it, not without it.
+    gnss_seen: bool,
+    /// Time of the first IMU sample at the horizon, ns.
+    first_imu_t_ns: Option<i64>,
+    /// The position hold of a filter without position aiding.
+    hold: PositionHold,
 }
 
 /// Most samples kept behind the horizon for the lever-arm gyro window (≈ 13 kB).
@@ -229,6 +244,11 @@ impl Eskf {
             horizon_lag_ns: horizon_lag_ns(config, &params),
             corrected: false,
             lla: None,
+            gnssless: false,
+            frame_provisional: false,
+            gnss_seen: false,
+            first_imu_t_ns: None,
+            hold: PositionHold::default(),
             params,
         };
         if let Some(o) = origin {
@@ -286,6 +306,8 @@ impl Eskf {
     /// Adds a GNSS fix (already validated) to the delay buffer.
     pub fn push_gnss(&mut self, fix: &uavnav_core::GnssFix) {
         let lla = Lla::from_deg(fix.lat_deg, fix.lon_deg, fix.alt_m);
+        self.gnss_seen = true;
+        self.replace_provisional_frame(lla);
         if self.frame.is_none() {
             self.set_frame(lla);
         }
@@ -409,7 +431,12 @@ impl Eskf {
         self.integrate_to(&a, &b, b.t_ns);
         let dt_s = (b.t_ns - a.t_ns) as f64 * 1e-9;
         self.observed_imu_noise(&a, &b, dt_s);
-        let bg = self.x.as_ref().map_or_else(Vector3::zeros, |x| x.bg);
+        // Without GNSS the bank sees a zero bias, as it would had the filter waited for a fix
+        // (`gnssless`: the start from the first fix is then the same).
+        let bg = match self.x.as_ref() {
+            Some(x) if !self.gnssless => x.bg,
+            _ => Vector3::zeros(),
+        };
         let m = mean_of(&a, &b);
         self.yaw_est.predict(&(m.gyro - bg), &m.accel, dt_s);
         if let Some(done) = self.imu.pop_front() {
@@ -424,7 +451,7 @@ impl Eskf {
                 self.imu_behind.pop_front();
             }
         }
-        if self.x.is_none() {
+        if self.x.is_none() || self.gnssless {
             self.init.add_imu(
                 b.t_ns,
                 &b.gyro_radps,
@@ -432,6 +459,8 @@ impl Eskf {
                 self.params.init_level_window_s,
             );
         }
+        self.try_start_without_gnss(b.t_ns);
+        self.hold_position(b.t_ns);
     }
 
     /// Integrates the nominal state to `t_ns` within the IMU interval `[a, b]`.
@@ -527,6 +556,9 @@ impl Eskf {
 
     /// Handles one buffered event at the horizon (state already integrated to its time).
     fn process(&mut self, e: Event, a: &ImuSample, b: &ImuSample) {
+        if self.gnssless && matches!(e, Event::Gnss(_)) {
+            self.restart_for_gnss();
+        }
         if self.x.is_none() {
             if let Event::Gnss(m) = e {
                 self.feed_yaw_estimator(&m);
@@ -588,7 +620,10 @@ impl Eskf {
         let (Some(x), Some(sigma_pa)) = (self.x, self.baro_sigma_pa) else {
             return;
         };
-        let gnss_active = self.gnss_pos.diag.active(t_ns, self.params.aid_timeout_ns);
+        // Without GNSS the first sample anchors the offset at the held height (as a GNSS height
+        // would), and the barometer holds the height from then on.
+        let gnss_active = self.gnss_pos.diag.active(t_ns, self.params.aid_timeout_ns)
+            || (self.gnssless && self.baro.offset.is_none());
         let params = BaroParams {
             height_sigma_m: self.params.baro_height_sigma_m,
             offset_walk_m_per_sqrt_s: self.params.baro_offset_walk_m_per_sqrt_s,
@@ -676,7 +711,8 @@ impl Eskf {
         };
         let use_ = VisionUse {
             rotation: self.params.use_vision_rotation,
-            translation: self.params.use_vision_translation,
+            // Without GNSS the place, and so the height above the terrain, is unknown.
+            translation: self.params.use_vision_translation && !self.gnssless,
             joint: self.params.vision_joint_update,
             cov_scale: self.params.vision_cov_scale,
             gate_sigma: self.params.gate_sigma,

@@ -24,13 +24,13 @@ impl Eskf {
             return Mode::Diverged;
         }
         let to = self.params.aid_timeout_ns;
-        if self.gnss_pos.diag.active(x.t_ns, to) {
+        self.gnssless_mode(if self.gnss_pos.diag.active(x.t_ns, to) {
             Mode::Nominal
         } else if self.vision.trans.active(x.t_ns, to) || self.vision.rot.active(x.t_ns, to) {
             Mode::GnssDeniedVision
         } else {
             Mode::InertialOnly
-        }
+        })
     }
 
     /// Whether the error covariance's diagonal is finite (a NaN variance would be reported as a
@@ -102,7 +102,7 @@ impl Eskf {
             .map(|v| v.max(0.0).sqrt())
         };
         let mut cov_th: Matrix3<f64> = self.p.fixed_view::<3, 3>(ITH, ITH).into_owned();
-        cov_th[(2, 2)] = cov_th[(2, 2)].max(self.yaw_sigma_floor_rad.powi(2));
+        cov_th[(2, 2)] = cov_th[(2, 2)].max(self.reported_yaw_floor_rad().powi(2));
         let (r, p_, y) = o.q.euler_angles();
         let euler_rad = Vector3::new(r, p_, y);
         Some(PoseOutput {

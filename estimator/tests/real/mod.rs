@@ -211,6 +211,8 @@ fn vehicle_from_board(dir: &Path) -> Option<nalgebra::Rotation3<f64>> {
 /// Which sensors a run uses.
 #[derive(Debug, Clone, Copy)]
 pub struct Use {
+    /// GNSS fed at all (without it the vehicle is configured without a receiver).
+    pub gnss: bool,
     pub mag: bool,
     pub baro: bool,
     /// GNSS fixes in `[t0, t1)` are withheld (a simulated outage).
@@ -232,6 +234,9 @@ pub fn run(
     if !use_.baro {
         config.baro = None;
     }
+    if !use_.gnss {
+        config.gnss = None;
+    }
     let mut est = Estimator::new(&config, params, None);
     let mut events: Vec<(i64, u8, usize)> = Vec::new();
     events.extend(f.imu.iter().enumerate().map(|(i, s)| (s.t_ns, 0, i)));
@@ -240,8 +245,10 @@ pub fn run(
             .iter()
             .enumerate()
             .filter(|(_, s)| {
-                use_.outage_ns
-                    .is_none_or(|(a, b)| s.t_ns < a || s.t_ns >= b)
+                use_.gnss
+                    && use_
+                        .outage_ns
+                        .is_none_or(|(a, b)| s.t_ns < a || s.t_ns >= b)
             })
             .map(|(i, s)| (s.t_ns, 1, i)),
     );
@@ -280,6 +287,8 @@ pub struct Score {
     pub rmse_deg: [f64; 3],
     pub max_yaw_err_deg: f64,
     pub yaw_within_3sigma: f64,
+    /// Roll and pitch errors within 3σ.
+    pub tilt_within_3sigma: [f64; 2],
     pub horizontal_rmse_m: f64,
     pub bad_sigma_rows: usize,
     pub rows: usize,
@@ -297,10 +306,13 @@ pub fn score(f: &RealFlight, poses: &[PoseOutput], start_ns: i64, end_ns: i64) -
     let mut sq = [0.0; 3];
     let mut n = 0usize;
     let mut within = 0usize;
+    let mut tilt_within = [0usize; 2];
     let mut j = 0usize;
     for p in poses {
         let bad = |v: &Vector3<f64>| v.iter().any(|x| !x.is_finite() || *x <= 0.0 || *x > 1e6);
-        if bad(&p.sigma_pos_ned_m) || bad(&p.sigma_att_rad) || bad(&p.sigma_vel_mps) {
+        // Position and velocity σ only where the mode reports them.
+        let pv = p.health.mode.has_position();
+        if bad(&p.sigma_att_rad) || (pv && (bad(&p.sigma_pos_ned_m) || bad(&p.sigma_vel_mps))) {
             s.bad_sigma_rows += 1;
         }
         s.rows += 1;
@@ -329,6 +341,9 @@ pub fn score(f: &RealFlight, poses: &[PoseOutput], start_ns: i64, end_ns: i64) -
         if e[2].abs() <= 3.0 * p.sigma_att_rad.z {
             within += 1;
         }
+        for k in 0..2 {
+            tilt_within[k] += usize::from(e[k].abs() <= 3.0 * p.sigma_att_rad[k]);
+        }
         n += 1;
     }
     if n > 0 {
@@ -336,11 +351,16 @@ pub fn score(f: &RealFlight, poses: &[PoseOutput], start_ns: i64, end_ns: i64) -
             *out = (sum / n as f64).sqrt().to_degrees();
         }
         s.yaw_within_3sigma = within as f64 / n as f64;
+        s.tilt_within_3sigma = tilt_within.map(|w| w as f64 / n as f64);
     }
     // Horizontal against the raw fixes (the fix stamp is its validity time here).
     if let Some(first) = f.gnss.first() {
         let frame = LocalFrame::new(Lla::from_deg(first.lat_deg, first.lon_deg, first.alt_m));
         let (mut sum, mut m) = (0.0, 0usize);
+        let poses: Vec<&PoseOutput> = poses
+            .iter()
+            .filter(|p| p.health.mode.has_position())
+            .collect();
         let mut k = 0usize;
         for g in f
             .gnss
@@ -391,13 +411,16 @@ impl std::fmt::Display for Score {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "roll/pitch/yaw RMSE {:.2}/{:.2}/{:.2} deg (max yaw {:.1}), yaw within 3 sigma {:.1} %, \
+            "roll/pitch/yaw RMSE {:.2}/{:.2}/{:.2} deg (max yaw {:.1}), roll/pitch/yaw within 3 \
+             sigma {:.1}/{:.1}/{:.1} %, \
              horizontal RMSE vs fixes {:.2} m, GNSS pos rejected {}, longest unfused {:.1} s, \
              bad sigma rows {}/{}",
             self.rmse_deg[0],
             self.rmse_deg[1],
             self.rmse_deg[2],
             self.max_yaw_err_deg,
+            100.0 * self.tilt_within_3sigma[0],
+            100.0 * self.tilt_within_3sigma[1],
             100.0 * self.yaw_within_3sigma,
             self.horizontal_rmse_m,
             self.gnss_rejected,

@@ -25,6 +25,7 @@ pub fn mode_to_wire(m: Mode) -> v1::EstimatorMode {
         Mode::GnssDeniedVision => v1::EstimatorMode::GnssDeniedVision,
         Mode::InertialOnly => v1::EstimatorMode::InertialOnly,
         Mode::Diverged => v1::EstimatorMode::Diverged,
+        Mode::AttitudeOnly => v1::EstimatorMode::AttitudeOnly,
     }
 }
 
@@ -43,6 +44,7 @@ pub fn mode_from_wire(field: &str, raw: i32) -> Result<Mode, ConvertError> {
             v1::EstimatorMode::GnssDeniedVision => Mode::GnssDeniedVision,
             v1::EstimatorMode::InertialOnly => Mode::InertialOnly,
             v1::EstimatorMode::Diverged => Mode::Diverged,
+            v1::EstimatorMode::AttitudeOnly => Mode::AttitudeOnly,
         },
     )
 }
@@ -184,8 +186,8 @@ pub fn pose_health_from_wire(
     })
 }
 
-/// The complete wire pose of an estimator output (every optional field set; `covariance_9x9`
-/// empty).
+/// The complete wire pose of an estimator output (every optional field set but, in
+/// [`Mode::AttitudeOnly`], position, velocity and their σ; `covariance_9x9` empty).
 pub fn pose_to_wire(vehicle_id: &str, p: &PoseOutput, ingest_wall_ns: i64) -> v1::PoseEstimate {
     let PoseOutput {
         t_ns,
@@ -202,23 +204,24 @@ pub fn pose_to_wire(vehicle_id: &str, p: &PoseOutput, ingest_wall_ns: i64) -> v1
         health,
         aiding,
     } = p;
+    let pv = health.mode.has_position();
     v1::PoseEstimate {
         vehicle_id: vehicle_id.to_owned(),
         t_ns: *t_ns,
-        position: Some(lla.into()),
-        vel_ned_mps: Some(vel_ned_mps.into()),
+        position: pv.then(|| lla.into()),
+        vel_ned_mps: pv.then(|| vel_ned_mps.into()),
         nav_from_body: Some(nav_from_body.into()),
         roll_rad: euler_rad.x,
         pitch_rad: euler_rad.y,
         yaw_rad: euler_rad.z,
-        sigma_pos_ned_m: Some(sigma_pos_ned_m.into()),
-        sigma_vel_ned_mps: Some(sigma_vel_mps.into()),
+        sigma_pos_ned_m: pv.then(|| sigma_pos_ned_m.into()),
+        sigma_vel_ned_mps: pv.then(|| sigma_vel_mps.into()),
         sigma_att_rad: Some(sigma_att_rad.into()),
         covariance_9x9: Vec::new(),
         aiding_sources: aiding_to_wire(aiding).map(|s| s as i32).collect(),
         mode: mode_to_wire(health.mode) as i32,
         ingest_wall_ns,
-        pos_ned_m: Some(pos_ned_m.into()),
+        pos_ned_m: pv.then(|| pos_ned_m.into()),
         gyro_bias_radps: Some(gyro_bias_radps.into()),
         accel_bias_mps2: Some(accel_bias_mps2.into()),
         health: Some(health.into()),
@@ -229,6 +232,17 @@ pub fn pose_to_wire(vehicle_id: &str, p: &PoseOutput, ingest_wall_ns: i64) -> v1
 fn optional_vector3(field: &str, v: &Option<v1::Vector3>) -> Result<Vector3<f64>, ConvertError> {
     v.as_ref()
         .map_or(Ok(Vector3::zeros()), |v| vector3(field, v))
+}
+
+/// How a 3-vector field is read: its name and value.
+type Vector3Reader = fn(&str, &Option<v1::Vector3>) -> Result<Vector3<f64>, ConvertError>;
+
+/// An optional σ: as [`sigma3`] when present, zero when absent.
+fn optional_sigma3(field: &str, v: &Option<v1::Vector3>) -> Result<Vector3<f64>, ConvertError> {
+    match v {
+        Some(_) => sigma3(field, v),
+        None => Ok(Vector3::zeros()),
+    }
 }
 
 /// A non-negative finite 3-vector (a σ).
@@ -242,11 +256,26 @@ fn sigma3(field: &str, v: &Option<v1::Vector3>) -> Result<Vector3<f64>, ConvertE
 
 impl TryFrom<&v1::PoseEstimate> for PoseOutput {
     type Error = ConvertError;
-    /// Position, velocity, attitude, σ and mode are required; `pos_ned_m`, the biases and the
+    /// Position, velocity, attitude, σ and mode are required (position, velocity and their σ
+    /// not in [`Mode::AttitudeOnly`], where they read as zero); `pos_ned_m`, the biases and the
     /// health summary read as zero / default when absent (the service's compact pose).
     fn try_from(p: &v1::PoseEstimate) -> Result<Self, ConvertError> {
-        let lla =
-            Lla::try_from(required("position", &p.position)?).map_err(|e| e.within("position"))?;
+        let mode = mode_from_wire("mode", p.mode)?;
+        let pv = mode.has_position();
+        let lla = match (&p.position, pv) {
+            (None, false) => Lla::from_deg(0.0, 0.0, 0.0),
+            _ => Lla::try_from(required("position", &p.position)?)
+                .map_err(|e| e.within("position"))?,
+        };
+        // Required where the mode estimates them, zero when absent otherwise.
+        let (vector, sigma) = if pv {
+            (required_vector3 as Vector3Reader, sigma3 as Vector3Reader)
+        } else {
+            (
+                optional_vector3 as Vector3Reader,
+                optional_sigma3 as Vector3Reader,
+            )
+        };
         let q = required("nav_from_body", &p.nav_from_body)?;
         for (name, c) in [("w", q.w), ("x", q.x), ("y", q.y), ("z", q.z)] {
             finite(name, c).map_err(|e| e.within("nav_from_body"))?;
@@ -267,7 +296,6 @@ impl TryFrom<&v1::PoseEstimate> for PoseOutput {
         } else {
             UnitQuaternion::from_quaternion(raw)
         };
-        let mode = mode_from_wire("mode", p.mode)?;
         let health = match &p.health {
             Some(h) => pose_health_from_wire(mode, h).map_err(|e| e.within("health"))?,
             None => PoseHealth {
@@ -279,15 +307,15 @@ impl TryFrom<&v1::PoseEstimate> for PoseOutput {
             t_ns: p.t_ns,
             lla,
             pos_ned_m: optional_vector3("pos_ned_m", &p.pos_ned_m)?,
-            vel_ned_mps: required_vector3("vel_ned_mps", &p.vel_ned_mps)?,
+            vel_ned_mps: vector("vel_ned_mps", &p.vel_ned_mps)?,
             nav_from_body,
             euler_rad: Vector3::new(
                 finite("roll_rad", p.roll_rad)?,
                 finite("pitch_rad", p.pitch_rad)?,
                 finite("yaw_rad", p.yaw_rad)?,
             ),
-            sigma_pos_ned_m: sigma3("sigma_pos_ned_m", &p.sigma_pos_ned_m)?,
-            sigma_vel_mps: sigma3("sigma_vel_ned_mps", &p.sigma_vel_ned_mps)?,
+            sigma_pos_ned_m: sigma("sigma_pos_ned_m", &p.sigma_pos_ned_m)?,
+            sigma_vel_mps: sigma("sigma_vel_ned_mps", &p.sigma_vel_ned_mps)?,
             sigma_att_rad: sigma3("sigma_att_rad", &p.sigma_att_rad)?,
             gyro_bias_radps: optional_vector3("gyro_bias_radps", &p.gyro_bias_radps)?,
             accel_bias_mps2: optional_vector3("accel_bias_mps2", &p.accel_bias_mps2)?,

@@ -192,5 +192,6 @@ pub fn mode_name(m: i32) -> &'static str {
         EstimatorMode::GnssDeniedVision => "gnss_denied_vision",
         EstimatorMode::InertialOnly => "inertial_only",
         EstimatorMode::Diverged => "diverged",
+        EstimatorMode::AttitudeOnly => "attitude_only",
     }
 }

@@ -25,8 +25,9 @@ pub struct Args {
     /// Do not use the camera.
     #[arg(long)]
     pub no_vision: bool,
-    /// Do not use GNSS. The filters start from a GNSS fix (position, velocity, local frame), so
-    /// with this flag a run writes no pose: a GNSS-free start is not built yet.
+    /// Do not use GNSS. `eskf` then starts once level and reports attitude only (mode
+    /// `attitude_only`: the position, velocity and position-σ columns are empty); `paper` starts
+    /// from a GNSS fix and writes no pose.
     #[arg(long)]
     pub no_gnss: bool,
     /// Do not use the magnetometer (the heading then comes from the yaw-hypothesis bank).
@@ -265,8 +266,8 @@ pub fn run(args: Args) -> CliResult {
         RunChoice::from_args(&args),
         |p| {
             writeln!(csv, "{}", csv_row(p))?;
-            if let Some(t) = tum.as_mut() {
-                writeln!(t, "{}", tum_line(p))?;
+            if let (Some(t), Some(line)) = (tum.as_mut(), tum_line(p)) {
+                writeln!(t, "{line}")?;
             }
             Ok(())
         },
