@@ -161,14 +161,7 @@ impl Initialiser {
             return None;
         }
         let n = self.samples.len() as f64;
-        let f_b = self.samples.iter().map(|s| s.2).sum::<Vector3<f64>>() / n;
-        let spread = (self
-            .samples
-            .iter()
-            .map(|s| (s.2 - f_b).norm_squared())
-            .sum::<f64>()
-            / n)
-            .sqrt();
+        let (f_b, spread) = mean_and_spread(self.samples.iter().map(|s| s.2));
         let q = attitude_from_gravity(&f_b, g_n, 0.0)?;
         let g = g_n.norm();
         let unlevel = (((f_b.norm() - g).abs() + spread) / g).min(1.0).asin();
@@ -176,14 +169,7 @@ impl Initialiser {
         // GNSS the bias is learnt from the velocity in seconds, without it only slowly through
         // the tilt, and a MEMS turn-on bias of a few °/s would tilt the attitude by tens of
         // degrees first (EuRoC's IMU: 0.08 rad/s about one axis).
-        let w_b = self.samples.iter().map(|s| s.1).sum::<Vector3<f64>>() / n;
-        let gyro_spread = (self
-            .samples
-            .iter()
-            .map(|s| (s.1 - w_b).norm_squared())
-            .sum::<f64>()
-            / n)
-            .sqrt();
+        let (w_b, gyro_spread) = mean_and_spread(self.samples.iter().map(|s| s.1));
         let still = w_b.norm() <= START_BIAS_MAX_RADPS;
         // The mean's own noise, per axis.
         let bias_sigma = if still {
@@ -219,6 +205,14 @@ impl Initialiser {
             yaw_aligned: false,
         })
     }
+}
+
+/// The mean of some vectors and their RMS distance from it (zeros for none).
+fn mean_and_spread(v: impl Iterator<Item = Vector3<f64>> + Clone) -> (Vector3<f64>, f64) {
+    let n = v.clone().count().max(1) as f64;
+    let mean = v.clone().sum::<Vector3<f64>>() / n;
+    let spread = (v.map(|x| (x - mean).norm_squared()).sum::<f64>() / n).sqrt();
+    (mean, spread)
 }
 
 /// σ of an unknown vertical velocity at the alignment, m/s (a receiver that gives ground speed and

@@ -102,6 +102,21 @@ proptest! {
         prop_assert_eq!(&w.vehicle_id, "veh/1");
         prop_assert_eq!(w.ingest_wall_ns, 42);
         let back = PoseOutput::try_from(&w).unwrap();
+        // Attitude only: position, velocity and their σ are not sent and read back as zero.
+        let p = if p.health.mode.has_position() {
+            p
+        } else {
+            prop_assert!(w.position.is_none() && w.vel_ned_mps.is_none() && w.pos_ned_m.is_none());
+            prop_assert!(w.sigma_pos_ned_m.is_none() && w.sigma_vel_ned_mps.is_none());
+            PoseOutput {
+                lla: Lla::from_deg(0.0, 0.0, 0.0),
+                pos_ned_m: Vector3::zeros(),
+                vel_ned_mps: Vector3::zeros(),
+                sigma_pos_ned_m: Vector3::zeros(),
+                sigma_vel_mps: Vector3::zeros(),
+                ..p
+            }
+        };
         prop_assert!(close_lla(&back.lla, &p.lla), "{:?} vs {:?}", back.lla, p.lla);
         // Everything else bit for bit.
         let same_lla = PoseOutput { lla: p.lla, ..back };
@@ -195,6 +210,16 @@ fn bad_poses_name_the_field() {
     let mut w = good.clone();
     w.position = None;
     assert_eq!(PoseOutput::try_from(&w).unwrap_err().field(), "position");
+    // Attitude only: position, velocity and their σ may be absent (they read as zero).
+    let mut w = good.clone();
+    w.mode = v1::EstimatorMode::AttitudeOnly as i32;
+    w.position = None;
+    w.vel_ned_mps = None;
+    w.sigma_pos_ned_m = None;
+    let back = PoseOutput::try_from(&w).unwrap();
+    assert_eq!(back.health.mode, Mode::AttitudeOnly);
+    assert_eq!(back.sigma_pos_ned_m, Vector3::zeros());
+    assert_eq!(back.sigma_vel_mps, Vector3::repeat(0.1));
     let mut w = good.clone();
     w.sigma_att_rad.as_mut().unwrap().y = -1.0;
     assert_eq!(

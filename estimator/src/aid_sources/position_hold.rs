@@ -105,9 +105,9 @@ impl PositionHold {
         let point = self.point_ned_m?;
         let y = point - x.p;
         if vertical {
-            self.update::<3>(p, &y.into(), sigma_m, gate_sigma, t_ns)
+            self.update::<3>(p, &y, sigma_m, gate_sigma, t_ns)
         } else {
-            self.update::<2>(p, &y.xy().into(), sigma_m, gate_sigma, t_ns)
+            self.update::<2>(p, &y.xy(), sigma_m, gate_sigma, t_ns)
         }
     }
 

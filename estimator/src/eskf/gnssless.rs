@@ -51,7 +51,9 @@ impl Eskf {
         } else {
             0.0
         };
-        if !(((t_ns - first) as f64 * 1e-9) >= wait_s) {
+        // Written so that a NaN wait never starts (and an infinite one never does either).
+        let waited_s = (t_ns - first) as f64 * 1e-9;
+        if waited_s.partial_cmp(&wait_s).is_none_or(|o| o.is_lt()) {
             return;
         }
         if self.frame.is_none() {

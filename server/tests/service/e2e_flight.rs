@@ -175,3 +175,61 @@ async fn clipped_imu_samples_reach_health_and_metrics() {
     );
     server.shutdown().await.unwrap();
 }
+
+/// A vehicle configured without a receiver: the real engine starts it from the IMU alone and
+/// its poses carry the attitude only (`eskf::gnssless`).
+#[tokio::test]
+async fn a_vehicle_without_gnss_gets_its_attitude_and_no_position() {
+    // The real engine (the kit's echo engine makes no attitude).
+    let server = Server::start(test_config()).await.unwrap();
+    let mut c = common::client(&server).await;
+    let mut poses = c
+        .watch_poses(pb::WatchRequest {
+            vehicle_ids: vec!["indoor".into()],
+            ..Default::default()
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let mut config = uavnav_tests::wire::vehicle_config(false);
+    config.gnss = None;
+    let mut envs = vec![pb::SensorEnvelope {
+        vehicle_id: "indoor".into(),
+        sequence: 0,
+        payload: Some(pb::sensor_envelope::Payload::Config(config)),
+    }];
+    // 1.5 s of a level, still IMU in 50 ms batches: no fix ever.
+    let t0 = 1_000_000_000;
+    for b in 0..30i64 {
+        let samples = (0..10)
+            .map(|k| uavnav_tests::wire::imu(t0 + (b * 10 + k) * 5_000_000))
+            .collect();
+        envs.push(uavnav_tests::wire::imu_env("indoor", 1 + b as u64, samples));
+    }
+    let acks = common::ingest(&mut c, envs).await.unwrap();
+    assert!(
+        acks.iter()
+            .all(|a| a.status == pb::IngestStatus::Accepted as i32),
+        "{acks:?}"
+    );
+    let p = tokio::time::timeout(Duration::from_secs(5), poses.message())
+        .await
+        .unwrap()
+        .unwrap()
+        .unwrap();
+    assert_eq!(p.mode, pb::EstimatorMode::AttitudeOnly as i32, "{p:?}");
+    assert!(p.position.is_none() && p.vel_ned_mps.is_none() && p.sigma_pos_ned_m.is_none());
+    // Level: roll and pitch near zero, with a stated σ.
+    assert!(p.roll_rad.abs() < 0.01 && p.pitch_rad.abs() < 0.01, "{p:?}");
+    assert!(p.sigma_att_rad.is_some_and(|s| s.x > 0.0 && s.x < 0.2));
+    let latest = c
+        .get_pose(pb::GetPoseRequest {
+            vehicle_id: "indoor".into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(latest.mode, pb::EstimatorMode::AttitudeOnly as i32);
+    assert!(latest.position.is_none());
+    server.shutdown().await.unwrap();
+}
