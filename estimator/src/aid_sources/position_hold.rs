@@ -15,10 +15,11 @@
 //! a few `σ`.
 //!
 //! Lifecycle:
-//! * **off** while a position or velocity source is active (or before the filter starts);
+//! * **off** until the filter starts without GNSS (`eskf::gnssless`);
 //! * **active**: fused every [`HOLD_PERIOD_NS`] at the horizon; the vertical only when nothing
-//!   else holds the height (a barometer does);
-//! * **stopped** for good once GNSS starts the filter properly (`eskf::gnssless`).
+//!   else holds the height (a barometer does); no other position or velocity source runs
+//!   meanwhile (vision gives rotation only without GNSS);
+//! * **stopped** for good once GNSS starts the filter properly (the filter is rebuilt).
 //!
 //! Diagnostics: the innovation, its variance and the test ratio before the weighting; a
 //! down-weighted update counts as `rejected` (the vehicle is moving away from the hold point).
@@ -35,7 +36,7 @@ pub const HOLD_PERIOD_NS: i64 = 200_000_000;
 /// State of the source.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum HoldState {
-    /// Not fusing (a real source is active, or the filter has not started).
+    /// Not fusing (the filter has not started without GNSS).
     #[default]
     Off,
     /// Fusing the hold point.

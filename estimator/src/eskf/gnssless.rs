@@ -25,20 +25,14 @@ use super::Eskf;
 use crate::aid_sources::baro_height::BaroState;
 use crate::aid_sources::mag_heading::DEAD_FIELD_T;
 use crate::health::Mode;
-use crate::init::hold_yaw_unknown;
 
 /// The frame of a filter that does not know where it is: its origin at 45° N, 0° E, 0 m (only
 /// its normal gravity is used, and the Earth rate is left out).
-pub fn provisional_frame() -> LocalFrame {
+fn provisional_frame() -> LocalFrame {
     LocalFrame::new(Lla::from_deg(45.0, 0.0, 0.0))
 }
 
 impl Eskf {
-    /// Whether the filter runs without GNSS (attitude only).
-    pub fn gnssless(&self) -> bool {
-        self.gnssless
-    }
-
     /// At the horizon `t_ns` with no filter yet: starts without GNSS when it is time (see the
     /// module doc).
     pub(super) fn try_start_without_gnss(&mut self, t_ns: i64) {
@@ -73,8 +67,8 @@ impl Eskf {
             return;
         };
         self.x = Some(r.x);
+        // The start's covariance already has the heading unknown and uncorrelated.
         self.p = r.p;
-        hold_yaw_unknown(&mut self.p);
         self.yaw_aligned = false;
         self.gnssless = true;
         self.hold.start(&r.x);

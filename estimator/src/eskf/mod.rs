@@ -13,8 +13,6 @@ mod gnssless;
 mod heading;
 mod report;
 
-pub use gnssless::provisional_frame;
-
 pub use heading::HeadingSource;
 
 use std::collections::VecDeque;
