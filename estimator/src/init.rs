@@ -142,6 +142,60 @@ pub const GNSSLESS_START_VEL_SIGMA_MPS: f64 = 1.0;
 /// anything faster is a turn.
 pub const START_BIAS_MAX_RADPS: f64 = 0.1;
 
+/// Largest mean gyro taken as its bias when the accelerometer disproves the rotation
+/// ([`rotation_disproved`]), rad/s (57 °/s): beyond any MEMS gyro's turn-on bias.
+pub const START_BIAS_PROVEN_MAX_RADPS: f64 = 1.0;
+
+/// Whether the accelerometer shows that the mean gyro over the levelling window is not a
+/// rotation, so that it is the gyro's bias however large (eq. I2, ours). A rotation at `ω`
+/// turns the specific force's direction in the body at `|ω_⊥|`, the rate's component across it;
+/// between the means of the window's first and last thirds, `Δt` apart, it would turn by
+/// `|ω_⊥| Δt`. Disproved when it turned by less than half of that, and that is at least three
+/// times what the accelerometer's noise can hide (`spread / g · √(2/k)`, `k` samples a third).
+/// The component along the specific force cannot be checked that way (a yaw turn does not move
+/// gravity in the body), so it must stay under [`START_BIAS_MAX_RADPS`]; and the specific force
+/// must be within 10 % of gravity: a coordinated turn also holds the specific force still in
+/// the body, but its rate lies mostly along it unless banked beyond 45° (1.41 g).
+/// Public ArduPilot logs `7-9-2014/6` and `/7` start level and still on a bench (the specific
+/// force steady to 0.2 m/s²) with the gyro reading −0.15, −0.15, −0.03 rad/s, left uncalibrated:
+/// taken as a turn, it rolled the estimate through 180° in 18 s at a stated tilt σ of 3–7°.
+pub fn rotation_disproved<'a>(
+    samples: impl ExactSizeIterator<Item = &'a (i64, Vector3<f64>, Vector3<f64>)> + Clone,
+    f_b: &Vector3<f64>,
+    w_b: &Vector3<f64>,
+    g: f64,
+    spread: f64,
+) -> bool {
+    let n = samples.len();
+    let k = n / 3;
+    let f_norm = f_b.norm();
+    if k < 2 || w_b.norm() > START_BIAS_PROVEN_MAX_RADPS || (f_norm - g).abs() > 0.1 * g {
+        return false;
+    }
+    let f_hat = f_b / f_norm;
+    let w_along = w_b.dot(&f_hat);
+    if w_along.abs() > START_BIAS_MAX_RADPS {
+        return false;
+    }
+    let w_across = (w_b - f_hat * w_along).norm();
+    let Some(&(t0, _, _)) = samples.clone().next() else {
+        return false;
+    };
+    let third = |it: &mut dyn Iterator<Item = &'a (i64, Vector3<f64>, Vector3<f64>)>| {
+        let (mut t, mut f) = (0.0, Vector3::zeros());
+        for s in it.take(k) {
+            t += (s.0 - t0) as f64 * 1e-9;
+            f += s.2;
+        }
+        (t / k as f64, f / k as f64)
+    };
+    let (t_a, f_a) = third(&mut samples.clone());
+    let (t_b, f_b_last) = third(&mut samples.skip(n - k));
+    let would_rad = w_across * (t_b - t_a);
+    let noise_rad = spread / g * (2.0 / k as f64).sqrt();
+    would_rad >= 3.0 * noise_rad && f_a.angle(&f_b_last) < 0.5 * would_rad
+}
+
 impl Initialiser {
     /// Starts without a GNSS fix, at `p_ned` (the hold point) with zero velocity, levelled on the
     /// mean specific force taken as gravity alone (no GNSS to measure an acceleration): a tilt σ
@@ -170,7 +224,8 @@ impl Initialiser {
         // the tilt, and a MEMS turn-on bias of a few °/s would tilt the attitude by tens of
         // degrees first (EuRoC's IMU: 0.08 rad/s about one axis).
         let (w_b, gyro_spread) = mean_and_spread(self.samples.iter().map(|s| s.1));
-        let still = w_b.norm() <= START_BIAS_MAX_RADPS;
+        let still = w_b.norm() <= START_BIAS_MAX_RADPS
+            || rotation_disproved(self.samples.iter(), &f_b, &w_b, g, spread);
         // The mean's own noise, per axis.
         let bias_sigma = if still {
             params.init_gyro_bias_sigma_radps + gyro_spread / (3.0 * n).sqrt()
@@ -381,5 +436,44 @@ mod tests {
         assert!((r.x.v.x - 10.0).abs() < 1e-9, "{}", r.x.v);
         // σ from the two positions over 0.5 s: √2 · 1 m / 0.5 s.
         assert!((r.p[(IV, IV)].sqrt() - 2f64.sqrt() * 2.0).abs() < 1e-9);
+    }
+
+    /// 0.5 s at 50 Hz: `rate` from the gyro, and the specific force turning at `turn` (the
+    /// rotation that really happens) from level.
+    fn window(rate: Vector3<f64>, turn: Vector3<f64>) -> Vec<(i64, Vector3<f64>, Vector3<f64>)> {
+        (0..25)
+            .map(|i| {
+                let t = i as f64 * 0.02;
+                // Deterministic "noise" of ±0.05 m/s².
+                let wobble = Vector3::new(0.05, -0.05, 0.05) * if i % 2 == 0 { 1.0 } else { -1.0 };
+                let f = UnitQuaternion::from_scaled_axis(-turn * t) * Vector3::new(0.0, 0.0, -9.81);
+                (i * 20_000_000, rate, f + wobble)
+            })
+            .collect()
+    }
+
+    fn disproved(w: &[(i64, Vector3<f64>, Vector3<f64>)]) -> bool {
+        let (f, spread) = mean_and_spread(w.iter().map(|s| s.2));
+        let (g, _) = mean_and_spread(w.iter().map(|s| s.1));
+        rotation_disproved(w.iter(), &f, &g, 9.81, spread)
+    }
+
+    #[test]
+    fn a_large_gyro_bias_is_told_from_a_turn_by_the_accelerometer() {
+        let bias = Vector3::new(-0.154, -0.154, -0.029);
+        // Still on a bench: the gyro's reading is its bias.
+        assert!(disproved(&window(bias, Vector3::zeros())));
+        // The same rate, really turning: gravity moves in the body.
+        assert!(!disproved(&window(bias, bias)));
+        // Too much about gravity's axis, which the accelerometer cannot check.
+        assert!(!disproved(&window(
+            Vector3::new(0.0, 0.0, 0.2),
+            Vector3::zeros()
+        )));
+        // Too small a rate to show against the accelerometer's noise.
+        assert!(!disproved(&window(
+            Vector3::new(0.01, 0.0, 0.0),
+            Vector3::zeros()
+        )));
     }
 }
