@@ -146,6 +146,10 @@ pub const START_BIAS_MAX_RADPS: f64 = 0.1;
 /// ([`rotation_disproved`]), rad/s (57 °/s): beyond any MEMS gyro's turn-on bias.
 pub const START_BIAS_PROVEN_MAX_RADPS: f64 = 1.0;
 
+/// Largest spread of the gyro samples over the window, as a share of the rate across the
+/// specific force, for [`rotation_disproved`] (the bench logs: 0.1).
+const MAX_BIAS_RATE_SPREAD: f64 = 0.15;
+
 /// Whether the accelerometer shows that the mean gyro over the levelling window is not a
 /// rotation, so that it is the gyro's bias however large (eq. I2, ours). A rotation at `ω`
 /// turns the specific force's direction in the body at `|ω_⊥|`, the rate's component across it;
@@ -155,7 +159,11 @@ pub const START_BIAS_PROVEN_MAX_RADPS: f64 = 1.0;
 /// The component along the specific force cannot be checked that way (a yaw turn does not move
 /// gravity in the body), so it must stay under [`START_BIAS_MAX_RADPS`]; and the specific force
 /// must be within 10 % of gravity: a coordinated turn also holds the specific force still in
-/// the body, but its rate lies mostly along it unless banked beyond 45° (1.41 g).
+/// the body, but its rate lies mostly along it unless banked beyond 45° (1.41 g). A multirotor's
+/// specific force stays along its thrust axis through any manoeuvre, so the rate must also be
+/// steady (spread at most [`MAX_BIAS_RATE_SPREAD`] of it): only used at a start without GNSS,
+/// where the vehicle is taken to be at rest; the GNSS start learns the bias from the velocity
+/// (applied there too, it took copter_218's pitching at its first fix for a bias).
 /// Public ArduPilot logs `7-9-2014/6` and `/7` start level and still on a bench (the specific
 /// force steady to 0.2 m/s²) with the gyro reading −0.15, −0.15, −0.03 rad/s, left uncalibrated:
 /// taken as a turn, it rolled the estimate through 180° in 18 s at a stated tilt σ of 3–7°.
@@ -165,6 +173,7 @@ pub fn rotation_disproved<'a>(
     w_b: &Vector3<f64>,
     g: f64,
     spread: f64,
+    gyro_spread: f64,
 ) -> bool {
     let n = samples.len();
     let k = n / 3;
@@ -178,6 +187,12 @@ pub fn rotation_disproved<'a>(
         return false;
     }
     let w_across = (w_b - f_hat * w_along).norm();
+    // A flying multirotor's specific force stays along its thrust axis whatever it turns, so a
+    // steady specific force proves nothing unless the rate is steady too: a bias is constant,
+    // a manoeuvre is not (copter_218 at its first fix: 0.47 rad/s of pitch, spread 0.12).
+    if gyro_spread > MAX_BIAS_RATE_SPREAD * w_across {
+        return false;
+    }
     let Some(&(t0, _, _)) = samples.clone().next() else {
         return false;
     };
@@ -225,7 +240,7 @@ impl Initialiser {
         // degrees first (EuRoC's IMU: 0.08 rad/s about one axis).
         let (w_b, gyro_spread) = mean_and_spread(self.samples.iter().map(|s| s.1));
         let still = w_b.norm() <= START_BIAS_MAX_RADPS
-            || rotation_disproved(self.samples.iter(), &f_b, &w_b, g, spread);
+            || rotation_disproved(self.samples.iter(), &f_b, &w_b, g, spread, gyro_spread);
         // The mean's own noise, per axis.
         let bias_sigma = if still {
             params.init_gyro_bias_sigma_radps + gyro_spread / (3.0 * n).sqrt()
@@ -454,8 +469,8 @@ mod tests {
 
     fn disproved(w: &[(i64, Vector3<f64>, Vector3<f64>)]) -> bool {
         let (f, spread) = mean_and_spread(w.iter().map(|s| s.2));
-        let (g, _) = mean_and_spread(w.iter().map(|s| s.1));
-        rotation_disproved(w.iter(), &f, &g, 9.81, spread)
+        let (g, g_spread) = mean_and_spread(w.iter().map(|s| s.1));
+        rotation_disproved(w.iter(), &f, &g, 9.81, spread, g_spread)
     }
 
     #[test]
