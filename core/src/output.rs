@@ -136,6 +136,10 @@ pub struct PoseHealth {
     /// Roll and pitch from the GNSS acceleration (`paper` profile, our addition; never fused by
     /// `eskf`, whose GNSS velocity update carries the same information).
     pub gnss_tilt: SourceSummary,
+    /// Position hold (`eskf` without position aiding: "within `noaid_pos_sigma_m` of where it
+    /// started", our addition; PX4's fake position). Its test ratio tells how far the vehicle
+    /// has travelled against what the hold assumes.
+    pub position_hold: SourceSummary,
     /// Inputs refused by validation (NaN, time going backwards, …).
     pub inputs_rejected: u64,
     /// Measurements that arrived behind the fusion horizon and were dropped.

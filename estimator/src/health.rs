@@ -27,6 +27,8 @@ pub struct Health {
     /// GNSS-acceleration tilt diagnostics (`paper` profile, our addition: computed at every
     /// window, fused or not).
     pub gnss_tilt: InnovDiag,
+    /// Position hold (`eskf` without position aiding).
+    pub position_hold: InnovDiag,
     /// Heading resets from the yaw estimator after alignment.
     pub yaw_resets: u32,
     /// Filter restarts after a detected divergence (paper profile: roll or pitch far from the
@@ -59,6 +61,7 @@ impl Default for Health {
             mag: InnovDiag::new(),
             baro: InnovDiag::new(),
             gnss_tilt: InnovDiag::new(),
+            position_hold: InnovDiag::new(),
             yaw_resets: 0,
             divergence_resets: 0,
             inputs_rejected: 0,
@@ -92,6 +95,7 @@ impl From<&Health> for PoseHealth {
             mag: (&h.mag).into(),
             baro: (&h.baro).into(),
             gnss_tilt: (&h.gnss_tilt).into(),
+            position_hold: (&h.position_hold).into(),
             inputs_rejected: h.inputs_rejected,
             late_dropped: h.late_dropped,
             vision_no_clone: h.vision_no_clone,

@@ -99,6 +99,11 @@ fn without_gnss_the_attitude_is_held_by_gravity_and_the_compass() {
     assert!(within >= 0.95, "{within}");
     let h = est.health();
     assert!(h.mag.fused > 0, "compass never fused");
+    // The hold is a source like the others: in the health and in every pose's summary.
+    assert!(h.position_hold.fused > 0, "position hold never fused");
+    let last = poses.last().unwrap().health.position_hold;
+    assert_eq!(last.fused, h.position_hold.fused);
+    assert!(last.test_ratio.is_finite());
 }
 
 #[test]

@@ -30,7 +30,7 @@ fn summary() -> impl Strategy<Value = SourceSummary> {
 fn health() -> impl Strategy<Value = PoseHealth> {
     (
         prop::sample::select(Mode::ALL.to_vec()),
-        prop::array::uniform7(summary()),
+        prop::array::uniform8(summary()),
         any::<[u64; 3]>(),
         any::<u32>(),
     )
@@ -43,6 +43,7 @@ fn health() -> impl Strategy<Value = PoseHealth> {
             mag: s[4],
             baro: s[5],
             gnss_tilt: s[6],
+            position_hold: s[7],
             inputs_rejected: c[0],
             late_dropped: c[1],
             vision_no_clone: c[2],

@@ -195,6 +195,7 @@ fn innovation(h: &Health) -> pb::InnovationRatios {
         magnetometer: h.mag.test_ratio,
         barometer: h.baro.test_ratio,
         gnss_tilt: h.gnss_tilt.test_ratio,
+        position_hold: h.position_hold.test_ratio,
     }
 }
 
