@@ -490,5 +490,12 @@ mod tests {
             Vector3::new(0.01, 0.0, 0.0),
             Vector3::zeros()
         )));
+        // A multirotor pitching about (0.47 rad/s on average, swinging by ±0.15) with its
+        // specific force steady on the thrust axis: the rate is not steady enough to be a bias.
+        let mut pitching = window(Vector3::zeros(), Vector3::zeros());
+        for (i, s) in pitching.iter_mut().enumerate() {
+            s.1 = Vector3::new(0.0, 0.47 + if i % 2 == 0 { 0.15 } else { -0.15 }, 0.0);
+        }
+        assert!(!disproved(&pitching));
     }
 }
