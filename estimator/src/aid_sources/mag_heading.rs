@@ -30,7 +30,9 @@
 //! * **stopped** for good, too, when the heading it gives keeps contradicting a converged yaw
 //!   bank (`Eskf::check_mag_against_bank`): a compass that is consistently wrong (a bad
 //!   calibration, a mounting error) must not hold the filter confidently wrong;
-//! * **active**: fused, gated like every source, at most every [`MIN_FUSION_INTERVAL_NS`]: the
+//! * **active**: fused as a heading only (a Schmidt update that holds [`HELD_STATES`]: it
+//!   corrects the yaw and the z gyro bias, not the tilt, the velocity or the other biases),
+//!   gated like every source, at most every [`MIN_FUSION_INTERVAL_NS`]: the
 //!   compass's error is time-correlated (calibration, motor current), so fusing every sample
 //!   would average away an error that does not average.
 
@@ -88,6 +90,7 @@ pub const HELD_STATES: [usize; 16] = [
     IGM + 1,
     IGM + 2,
 ];
+
 /// Largest static difference between the compass's typical inclination and the model's beyond
 /// `mag_max_inclination_error_rad`, rad: within it the compass is used with a wider heading σ.
 pub const MAX_STATIC_INCLINATION_ERROR_RAD: f64 = 0.35;
