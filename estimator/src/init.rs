@@ -148,7 +148,7 @@ pub const START_BIAS_PROVEN_MAX_RADPS: f64 = 1.0;
 
 /// Largest spread of the gyro samples over the window, as a share of the rate across the
 /// specific force, for [`rotation_disproved`] (the bench logs: 0.1).
-const MAX_BIAS_RATE_SPREAD: f64 = 0.15;
+pub const MAX_BIAS_RATE_SPREAD: f64 = 0.15;
 
 /// Whether the accelerometer shows that the mean gyro over the levelling window is not a
 /// rotation, so that it is the gyro's bias however large (eq. I2, ours). A rotation at `ω`
