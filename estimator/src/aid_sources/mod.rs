@@ -154,12 +154,14 @@ pub fn gated_update_considering<const M: usize>(
     } else {
         // Schmidt ("consider") update: the considered states keep their estimate, their
         // uncertainty still shapes the gain of the others, and the covariance stays that of the
-        // gain actually applied (Joseph form, valid for any gain).
+        // gain actually applied. Joseph form, valid for any gain, expanded so that it costs
+        // N²·M instead of two N³ products: (I − KH) P (I − KH)ᵀ + K R Kᵀ
+        // = P − K (PHᵀ)ᵀ − PHᵀ Kᵀ + K S Kᵀ, with S = H P Hᵀ + R (P symmetric).
         for &i in consider {
             k.row_mut(i).fill(0.0);
         }
-        let i_kh = Cov::identity() - k * h;
-        *p = i_kh * *p * i_kh.transpose() + k * r * k.transpose();
+        let ks = k * s;
+        *p -= k * pht.transpose() + pht * k.transpose() - ks * k.transpose();
     }
     let dx = k * y;
     symmetrize(p);
