@@ -184,3 +184,53 @@ fn corrupt_mcap_is_an_error_not_a_panic() {
     let e = Dataset::open(&m).unwrap_err().to_string();
     assert!(e.contains("c.mcap"), "{e}");
 }
+
+#[test]
+fn a_pose_without_a_position_is_recorded_without_a_display_pose() {
+    use uavnav_proto::v1;
+    let tmp = tempfile::tempdir().unwrap();
+    let m = tmp.path().join("poses.mcap");
+    let frame = uavnav_core::LocalFrame::new(uavnav_core::Lla::from_deg(43.0, -3.0, 50.0));
+    let level = Some(v1::Quaternion {
+        w: 1.0,
+        ..Default::default()
+    });
+    let placed = v1::PoseEstimate {
+        vehicle_id: "a".into(),
+        t_ns: 1_000,
+        position: Some(v1::GeodeticPosition {
+            latitude_deg: 43.0,
+            longitude_deg: -3.0,
+            altitude_m: 50.0,
+        }),
+        nav_from_body: level,
+        ..Default::default()
+    };
+    // Attitude only (running without GNSS): no position, so no place in the display frame.
+    let attitude_only = v1::PoseEstimate {
+        t_ns: 2_000,
+        position: None,
+        ..placed.clone()
+    };
+    let mut w = McapWriter::create(&m, &McapOptions::default()).unwrap();
+    w.write_pose("a", &placed, 1_000, Some(&frame)).unwrap();
+    w.write_pose("a", &attitude_only, 2_000, Some(&frame))
+        .unwrap();
+    w.finish().unwrap();
+    let bytes = fs::read(&m).unwrap();
+    let mut topics = std::collections::BTreeMap::<String, usize>::new();
+    for msg in mcap::MessageStream::new(&bytes).unwrap() {
+        *topics
+            .entry(msg.unwrap().channel.topic.clone())
+            .or_default() += 1;
+    }
+    let count = |leaf: &str| {
+        topics
+            .iter()
+            .filter(|(t, _)| t.ends_with(leaf))
+            .map(|(_, n)| n)
+            .sum::<usize>()
+    };
+    assert_eq!(count("/pose"), 2, "{topics:?}");
+    assert_eq!(count("/pose/frame"), 1, "{topics:?}");
+}

@@ -19,7 +19,10 @@
 //! | `/vehicle/{id}/camera` | `foxglove.CompressedImage` | camera frames as received (JPEG/PNG) |
 //!
 //! Frame `ned` is one local NED frame for the whole view, at the first position it sees, so the
-//! 3D panel places the vehicles of a fleet relative to each other. Message timestamps are sensor
+//! 3D panel places the vehicles of a fleet relative to each other. An estimate without a position
+//! (attitude only: a vehicle running without GNSS) still turns on `/vehicle/{id}/pose`, drawn at
+//! the vehicle's last drawn position or, before it has one, at the frame's origin; it adds
+//! nothing to the path or the map fix. Message timestamps are sensor
 //! times; log times are the wall clock at publication (what a live view plots against).
 //!
 //! The view is a task that owns the scene; [`LiveTap`] is the cloneable, non-blocking handle the
@@ -244,6 +247,8 @@ struct VehicleView {
     camera: Channel<CompressedImage>,
     path_poses: VecDeque<Pose>,
     last_path_t_ns: Option<i64>,
+    /// Where the last pose with a position was drawn (NED, m): an attitude-only pose goes there.
+    last_ned_m: Option<[f64; 3]>,
 }
 
 /// What the view task owns: the channels of every vehicle seen and the shared NED frame.
@@ -275,6 +280,7 @@ impl Scene {
                 camera: ctx.channel_builder(topic("camera")).build(),
                 path_poses: VecDeque::new(),
                 last_path_t_ns: None,
+                last_ned_m: None,
             };
             self.vehicles.insert(id.into(), v);
         }
@@ -284,8 +290,8 @@ impl Scene {
     }
 
     fn pose(&mut self, id: &str, p: &CompactPose) {
-        // An estimate without a valid position or attitude (initialising) has nothing to draw.
         let Some(lla) = p.position.as_ref().and_then(|g| Lla::try_from(g).ok()) else {
+            self.attitude_only(id, p);
             return;
         };
         let frame = *self.frame.get_or_insert_with(|| LocalFrame::new(lla));
@@ -303,6 +309,11 @@ impl Scene {
         let Ok(pose) = foxglove_conv::pose_in_frame(&p.to_wire(id), &frame) else {
             return;
         };
+        v.last_ned_m = pose
+            .pose
+            .as_ref()
+            .and_then(|q| q.position.as_ref())
+            .map(|x| [x.x, x.y, x.z]);
         v.pose.log(&pose);
         if due && let Some(inner) = pose.pose {
             v.last_path_t_ns = Some(p.t_ns);
@@ -317,6 +328,19 @@ impl Scene {
                     poses: v.path_poses.iter().cloned().collect(),
                 });
             }
+        }
+    }
+
+    /// A pose without a position: its attitude, drawn where the vehicle was last drawn (or at
+    /// the origin). One without an attitude either (initialising) has nothing to draw.
+    fn attitude_only(&mut self, id: &str, p: &CompactPose) {
+        let v = self.vehicle(id);
+        if !v.pose.has_sinks() {
+            return;
+        }
+        let at = v.last_ned_m.unwrap_or_default();
+        if let Ok(pose) = foxglove_conv::attitude_in_frame(&p.to_wire(id), at) {
+            v.pose.log(&pose);
         }
     }
 

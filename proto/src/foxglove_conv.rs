@@ -66,17 +66,25 @@ pub fn pose_in_frame(
             .ok_or_else(|| ConvertError::missing("position"))?,
     )
     .map_err(|e| e.within("position"))?;
-    let q = crate::convert::geometry::required_quaternion("nav_from_body", &p.nav_from_body)?;
     let ned = frame.lla_to_ned(&lla);
+    attitude_in_frame(p, [ned.x, ned.y, ned.z])
+}
+
+/// A pose estimate's attitude (`nav_from_body`) as a `foxglove.PoseInFrame` drawn at `at_ned_m`
+/// in the local NED frame (frame id [`NED_FRAME_ID`]), whatever position the estimate carries:
+/// for an estimate without one (attitude only, running without GNSS), which a 3D panel still
+/// shows turning in place.
+pub fn attitude_in_frame(
+    p: &v1::PoseEstimate,
+    at_ned_m: [f64; 3],
+) -> Result<PoseInFrame, ConvertError> {
+    let q = crate::convert::geometry::required_quaternion("nav_from_body", &p.nav_from_body)?;
+    let [x, y, z] = at_ned_m;
     Ok(PoseInFrame {
         timestamp: timestamp(p.t_ns),
         frame_id: NED_FRAME_ID.to_owned(),
         pose: Some(Pose {
-            position: Some(foxglove::messages::Vector3 {
-                x: ned.x,
-                y: ned.y,
-                z: ned.z,
-            }),
+            position: Some(foxglove::messages::Vector3 { x, y, z }),
             orientation: Some(foxglove::messages::Quaternion {
                 x: q.i,
                 y: q.j,

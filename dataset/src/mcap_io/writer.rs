@@ -329,7 +329,9 @@ impl McapWriter {
         )
     }
 
-    /// Writes a pose estimate; with `frame`, also its `foxglove.PoseInFrame` on the display channel.
+    /// Writes a pose estimate; with `frame`, also its `foxglove.PoseInFrame` on the display channel
+    /// when it has a position (an attitude-only estimate, running without GNSS, has no place in
+    /// the frame: it is recorded on the pose channel only).
     pub fn write_pose(
         &mut self,
         vehicle: &str,
@@ -338,7 +340,9 @@ impl McapWriter {
         frame: Option<&LocalFrame>,
     ) -> Result<()> {
         self.write_message(vehicle, Stream::Pose, pose, pose.t_ns, log_time_ns)?;
-        if let (true, Some(frame)) = (self.options.display_channels, frame) {
+        if let (true, Some(frame), Some(_)) =
+            (self.options.display_channels, frame, pose.position.as_ref())
+        {
             let display =
                 foxglove_conv::pose_in_frame(pose, frame).map_err(|e| DatasetError::Invalid {
                     path: self.path.clone(),

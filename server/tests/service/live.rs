@@ -192,6 +192,76 @@ async fn live_view_shows_pose_path_gnss_and_camera_of_each_vehicle() {
     server.shutdown().await.unwrap();
 }
 
+/// A vehicle running without GNSS (attitude-only poses) still shows its attitude: its pose topic
+/// carries the filter's `nav_from_body`, drawn at the frame's origin (it has no position yet).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn live_view_shows_the_attitude_of_a_vehicle_without_gnss() {
+    let mut config = test_config();
+    config.foxglove.addr = Some("127.0.0.1:0".into());
+    // The real engine: the kit's echo engine makes no attitude.
+    let server = uavnavd::Server::start(config).await.unwrap();
+    let port = server.foxglove_port().expect("live view configured");
+    let mut ws = connect(port).await;
+    assert_eq!(
+        next(&mut ws).await.expect("serverInfo first")["op"],
+        "serverInfo"
+    );
+
+    let mut grpc = client(&server).await;
+    let mut vehicle = vehicle_config(false);
+    vehicle.gnss = None;
+    let t0 = 1_000_000_000i64;
+    // A level, still IMU in 50 ms batches; `from` counts 5 ms samples.
+    let batches = |from: i64, n: i64| -> Vec<uavnav_proto::v1::SensorEnvelope> {
+        (0..n)
+            .map(|b| {
+                let k0 = from + b * 10;
+                let samples = (k0..k0 + 10).map(|k| imu(t0 + k * 5_000_000)).collect();
+                imu_env("indoor", 1 + k0 as u64, samples)
+            })
+            .collect()
+    };
+    let mut first = vec![uavnav_proto::v1::SensorEnvelope {
+        vehicle_id: "indoor".into(),
+        sequence: 0,
+        payload: Some(uavnav_proto::v1::sensor_envelope::Payload::Config(vehicle)),
+    }];
+    first.extend(batches(0, 30));
+    ingest(&mut grpc, first).await.unwrap();
+    let topics = advertised(&mut ws, 6).await;
+    let pose_channel = topics["/vehicle/indoor/pose"].0;
+    let sub = serde_json::json!({
+        "op": "subscribe",
+        "subscriptions": [{"id": 1, "channelId": pose_channel}],
+    });
+    ws.send(Message::Text(sub.to_string().into()))
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    ingest(&mut grpc, batches(300, 10)).await.unwrap();
+
+    let pose = loop {
+        let Err(bin) = next(&mut ws).await else {
+            continue;
+        };
+        assert_eq!(bin[0], 1, "message data opcode");
+        break foxglove::messages::PoseInFrame::decode(&bin[13..]).unwrap();
+    };
+    assert_eq!(pose.frame_id, "ned");
+    let inner = pose.pose.unwrap();
+    let p = inner.position.unwrap();
+    assert_eq!(
+        (p.x, p.y, p.z),
+        (0.0, 0.0, 0.0),
+        "no position: at the origin"
+    );
+    // Level (heading unknown): a rotation about the vertical only, of unit norm.
+    let q = inner.orientation.unwrap();
+    assert!(q.x.abs() < 0.01 && q.y.abs() < 0.01, "{q:?}");
+    assert!((q.w * q.w + q.z * q.z - 1.0).abs() < 1e-3, "{q:?}");
+    server.shutdown().await.unwrap();
+}
+
 #[tokio::test]
 async fn a_busy_port_is_a_clear_startup_error() {
     let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
