@@ -176,7 +176,6 @@ impl Eskf {
     /// stopped correcting the heading as it wandered with the gyro, 21.6° yaw RMSE against
     /// 10.8°.)
     ///
-    ///
     /// Before the heading is aligned: the horizontal accelerometer bias. It is a body-frame
     /// quantity that only the unknown heading maps into the velocity, and the yaw, held
     /// uncorrelated while unknown, leaves the velocity's σ without the heading's share of the
@@ -191,10 +190,7 @@ impl Eskf {
         if !self.yaw_aligned {
             return &[crate::state::IBA, crate::state::IBA + 1];
         }
-        if self.yaw_aligned
-            && self.heading_seen_by_gnss_velocity_only()
-            && self.yaw_est.heading_unobservable()
-        {
+        if self.heading_seen_by_gnss_velocity_only() && self.yaw_est.heading_unobservable() {
             &[ITH + 2]
         } else {
             &[]
@@ -307,9 +303,9 @@ impl Eskf {
     /// The tilt was told apart from that bias by the same linearisation: only a yaw turn
     /// separates a tilt error `δθ` from a horizontal bias `δb` (level, `g δθ ≈ δb` in the
     /// specific force), and under an unknown heading the turn was seen with the wrong heading.
-    /// So the tilt's variance gets back the bias's share, `σ_b² / g²` per axis (eq. A1, ours). Why: on
-    /// a simulated multirotor without a compass and with a 0.3 m/s² turn-on accelerometer bias,
-    /// the roll stayed 1–2.5° off for 20 s at a σ of 0.3–0.6° after the alignment.
+    /// So the tilt's variance gets back the bias's share, `σ_b² / g²` per axis (eq. A1, ours).
+    /// Why: on a simulated multirotor without a compass and with a 0.3 m/s² turn-on accelerometer
+    /// bias, the roll stayed 1–2.5° off for 20 s at a σ of 0.3–0.6° after the alignment.
     fn forget_horizontal_accel_bias(&mut self) {
         const G_MPS2: f64 = 9.80665;
         let s2 = self.params.init_accel_bias_sigma_mps2.powi(2);
