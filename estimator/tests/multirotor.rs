@@ -196,8 +196,8 @@ fn large_turn_on_biases_without_a_compass_leave_the_tilt_sigma_honest() {
     assert_eq!(src, HeadingSource::YawEstimator);
     // Also scored after 30 s, as `estimate --report` scores.
     let t30 = f.scenario().t0_ns + 30_000_000_000;
-    let aligned: Vec<_> = poses.iter().filter(|p| p.t_ns >= t30).copied().collect();
-    assert!(aligned.len() > 4000, "{}", aligned.len());
+    let after_30s: Vec<_> = poses.iter().filter(|p| p.t_ns >= t30).copied().collect();
+    assert!(after_30s.len() > 4000, "{}", after_30s.len());
     let (whole, _) = tilt_scores(&f, &poses);
     eprintln!(
         "large biases, no compass: tilt within 3 sigma over the whole flight {:.1} / {:.1} %",
@@ -205,7 +205,7 @@ fn large_turn_on_biases_without_a_compass_leave_the_tilt_sigma_honest() {
         100.0 * whole[1]
     );
     assert!(whole.iter().all(|w| *w >= 0.95), "{whole:?}");
-    let (within, rms) = tilt_scores(&f, &aligned);
+    let (within, rms) = tilt_scores(&f, &after_30s);
     eprintln!(
         "large biases, no compass: tilt within 3 sigma {:.1} / {:.1} %, RMS {:.2} / {:.2} deg",
         100.0 * within[0],
