@@ -170,7 +170,7 @@ impl Estimator {
     }
 
     /// Adds a GNSS fix (fused at its time of validity, its stamp less the configured GNSS delay,
-    /// behind the newest IMU sample).
+    /// behind the newest IMU sample; `eskf` learns the velocity's own delay, `crate::gnss_delay`).
     pub fn push_gnss(&mut self, fix: &GnssFix) -> Result<(), InputError> {
         // EGM96 N at the fix for MSL (NaN for a non-finite position: refused below like the fix).
         let alt_m = self
@@ -188,7 +188,7 @@ impl Estimator {
         }
         self.last_gnss_t_ns = Some(f.t_ns);
         match &mut self.profile {
-            Profile::Eskf(e) => e.push_gnss(f),
+            Profile::Eskf(e) => e.push_gnss(f, fix.t_ns),
             Profile::Paper(p) => p.push_gnss(f),
         }
         Ok(())

@@ -45,6 +45,9 @@ pub struct Health {
     /// IMU intervals with a clipped (saturated) accelerometer or gyro axis (`eskf`; handled by
     /// extra process noise).
     pub imu_clipped: u64,
+    /// The GNSS velocity's delay in use, s (`eskf`: the configured one until eq. D1 learns
+    /// another, `crate::gnss_delay`; `None` for `paper`, which uses the configured one).
+    pub gnss_velocity_delay_s: Option<f64>,
     /// Covariance diagonal of the error state (layout: [`crate::state::STATE_LABELS`] for `eskf`;
     /// the paper profile fills p, v, attitude and leaves the rest 0).
     pub cov_diag: [f64; crate::state::N],
@@ -69,6 +72,7 @@ impl Default for Health {
             vision_no_clone: 0,
             gnss_resets: 0,
             imu_clipped: 0,
+            gnss_velocity_delay_s: None,
             cov_diag: [0.0; crate::state::N],
         }
     }

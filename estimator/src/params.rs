@@ -171,6 +171,11 @@ pub struct EstimatorParams {
     /// that flies nose first (a fixed wing); a multirotor flies sideways and backwards, so the
     /// default is `false` and the heading comes from the magnetometer or the yaw estimator.
     pub course_heading: bool,
+    /// Learn the GNSS receiver's effective delay from the data (`eskf`; eq. D1,
+    /// `crate::gnss_delay`), starting from the configured one: the delay an autopilot's log states
+    /// is what it assumed, and on the public ArduPilot logs the fixed wings' receivers lagged
+    /// 0.00–0.04 s where 0.22 s was stated.
+    pub learn_gnss_delay: bool,
     /// Barometer: 1-σ height noise per sample beyond the sensor's pressure noise, m (static-port
     /// and propeller-wash errors: a few decimetres to metres on multirotors).
     pub baro_height_sigma_m: f64,
@@ -250,6 +255,7 @@ impl Default for EstimatorParams {
             mag_contradiction_timeout_ns: 10_000_000_000,
 
             course_heading: false,
+            learn_gnss_delay: true,
             baro_height_sigma_m: 0.5,
             baro_offset_walk_m_per_sqrt_s: 0.1,
             yaw_estimator: crate::yaw_estimator::YawEstimatorParams::default(),

@@ -9,6 +9,7 @@
 //! | [`gnssless`] | the start without GNSS, attitude only until the first fix |
 //! | `report` | mode, health, the pose output, the motion prior for vision |
 
+mod delay;
 mod gnssless;
 mod heading;
 mod report;
@@ -30,6 +31,7 @@ use crate::aid_sources::mag_heading::MagHeadingSource;
 use crate::aid_sources::position_hold::PositionHold;
 use crate::aid_sources::vision::{PlaneScale, VisionSource, VisionUse};
 use crate::buffer::{DelayBuffer, Event, MAX_IMU_HISTORY};
+use crate::gnss_delay::GnssDelayLearner;
 use crate::init::{Initialiser, hold_yaw_unknown};
 use crate::output::PoseOutput;
 use crate::output_predictor::{OutputPredictor, mean_of};
@@ -124,6 +126,8 @@ pub struct Eskf {
     first_imu_t_ns: Option<i64>,
     /// The position hold of a filter without position aiding.
     hold: PositionHold,
+    /// The GNSS receiver's effective delay (eq. D1; `delay.rs`).
+    gnss_delay: GnssDelayLearner,
 }
 
 /// Most samples kept behind the horizon for the lever-arm gyro window (≈ 13 kB).
@@ -247,6 +251,7 @@ impl Eskf {
             gnss_seen: false,
             first_imu_t_ns: None,
             hold: PositionHold::default(),
+            gnss_delay: GnssDelayLearner::new(config.gnss.map_or(0, |g| g.delay_ns)),
             params,
         };
         if let Some(o) = origin {
@@ -301,8 +306,9 @@ impl Eskf {
         &self.p
     }
 
-    /// Adds a GNSS fix (already validated) to the delay buffer.
-    pub fn push_gnss(&mut self, fix: &uavnav_core::GnssFix) {
+    /// Adds a GNSS fix (already validated, stamped with its time of validity: its stamp
+    /// `stamp_ns` as it arrived less the configured delay) to the delay buffer.
+    pub fn push_gnss(&mut self, fix: &uavnav_core::GnssFix, stamp_ns: i64) {
         let lla = Lla::from_deg(fix.lat_deg, fix.lon_deg, fix.alt_m);
         self.gnss_seen = true;
         self.replace_provisional_frame(lla);
@@ -317,6 +323,7 @@ impl Eskf {
             return;
         }
         let meas = GnssMeas::from_fix(fix, frame.lla_to_ned(&lla));
+        self.learn_delay_from_fix(fix, stamp_ns);
         if !self.buffer.push(Event::Gnss(meas)) {
             self.late_dropped += 1;
         }
@@ -437,6 +444,7 @@ impl Eskf {
         };
         let m = mean_of(&a, &b);
         self.yaw_est.predict(&(m.gyro - bg), &m.accel, dt_s);
+        self.learn_delay_from_imu(&a, &b, &m.accel);
         if let Some(done) = self.imu.pop_front() {
             // Kept for the lever-arm gyro window around a fix at the horizon.
             self.imu_behind.push_back(done);
@@ -642,7 +650,10 @@ impl Eskf {
     fn fuse_gnss(&mut self, m: &GnssMeas, gyro_b: &Vector3<f64>, gyro_var_radps2: f64) {
         self.feed_yaw_estimator(m);
         self.manage_heading(m);
-        self.gnss_vel.observe(m, &self.params.gnss_vel_consistency);
+        // The velocity at the fusion time, from its own time of validity (eq. D2).
+        let mv = self.velocity_at_fusion_time(m);
+        self.gnss_vel
+            .observe(&mv, &self.params.gnss_vel_consistency);
         let Some(mut x) = self.x else { return };
         // The Gauss–Markov error state follows the receiver's reported accuracy, fix by fix.
         self.noise.gm_psd = self.gnss_pos.follow_accuracy(
@@ -684,7 +695,7 @@ impl Eskf {
             gyro_b,
             gyro_var_radps2,
             &self.w_ie,
-            m,
+            &mv,
             gate,
             reset,
             consider,

@@ -11,7 +11,7 @@ use uavnav_core::{
     BaroConfig, BaroSample, FilterProfile, FixType, GnssConfig, GnssFix, GnssVelocity, ImuSample,
     Lla, LocalFrame, MagConfig, MagSample, VehicleConfig,
 };
-use uavnav_estimator::{Estimator, EstimatorParams, PoseOutput};
+use uavnav_estimator::{Estimator, EstimatorParams, Health, PoseOutput};
 
 /// The shared real flight `name`, or `None` (with a message) when `../shared` is absent.
 pub fn flight_dir(name: &str) -> Option<PathBuf> {
@@ -226,6 +226,16 @@ pub fn run(
     params: EstimatorParams,
     use_: Use,
 ) -> Vec<PoseOutput> {
+    run_with_health(f, profile, params, use_).0
+}
+
+/// [`run`], with the estimator's health at the end.
+pub fn run_with_health(
+    f: &RealFlight,
+    profile: FilterProfile,
+    params: EstimatorParams,
+    use_: Use,
+) -> (Vec<PoseOutput>, Health) {
     let mut config = f.config.clone();
     config.profile = profile;
     if !use_.mag {
@@ -278,7 +288,7 @@ pub fn run(
             }
         }
     }
-    out
+    (out, est.health())
 }
 
 /// Scores of one run.
