@@ -70,6 +70,9 @@ pub struct RunOutput {
     pub fed: Fed,
     /// The reader's notes (a flight log's import notes).
     pub notes: Vec<String>,
+    /// The GNSS delay the dataset states, and the GNSS velocity's delay the estimator ended
+    /// with (`eskf` learns it from the data), s.
+    pub gnss_delay_s: Option<(f64, f64)>,
 }
 
 /// Inputs the estimator accepted, per sensor.
@@ -157,6 +160,7 @@ pub fn run_dataset(
     };
     // The local frame is fixed at the first GNSS fix, exactly as in the service, so that the same
     // input gives the same poses offline and online; the report maps poses into the truth frame.
+    let stated_delay_s = config.gnss.map(|g| g.delay_ns as f64 * 1e-9);
     let mut runner = VehicleRunner::new(config, params, None);
     let mut out = RunOutput {
         origin: ds.origin(),
@@ -209,6 +213,9 @@ pub fn run_dataset(
                 }
             }
         }
+    }
+    if out.fed.gnss > 0 {
+        out.gnss_delay_s = stated_delay_s.zip(runner.health().gnss_velocity_delay_s);
     }
     // Truth first; a reference (another estimator's output) only where there is no truth, under
     // its own name, and screened against the fixes first (an autopilot's EKF that failed
@@ -289,6 +296,14 @@ pub fn run(args: Args) -> CliResult {
         crate::estimate_report::sources_label(&out),
         args.out.display()
     );
+    if let Some((stated, learnt)) = out.gnss_delay_s
+        && (stated - learnt).abs() >= 1e-3
+    {
+        eprintln!(
+            "uavnav: GNSS velocity delay learnt from the data: {learnt:.3} s (the dataset states \
+             {stated:.3} s; positions keep it)"
+        );
+    }
     if let Some(dir) = &args.report {
         let Some(comparison) = comparison else {
             return Err(CliError::input(anyhow::anyhow!(
