@@ -6,7 +6,7 @@
 //! differ there: on one surveyed copter the velocity lagged the position by 0.2 s), so the
 //! position keeps the configured delay and the velocity is moved to the fusion time.
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 use uavnav_core::{GnssFix, ImuSample};
 
 use super::Eskf;
@@ -105,21 +105,5 @@ impl Eskf {
             vel_ned_mps: Some(v_f),
             ..*m
         }
-    }
-
-    /// The position's time of validity is in doubt by the difference between the stated delay
-    /// and the velocity's learnt one (eq. D1 does not see the position's): its white noise gets
-    /// the along-track error of that much travel, `(v Δ)²` per axis, so that a position fused at
-    /// the stated time does not pull the attitude against the velocity.
-    pub(super) fn with_position_timing_noise(&self, m: &GnssMeas, r: Matrix3<f64>) -> Matrix3<f64> {
-        let dt_s = (self.gnss_delay.configured_ns() - self.gnss_delay.delay_ns()) as f64 * 1e-9;
-        let Some(v) = m.vel_ned_mps.or(self.x.as_ref().map(|x| x.v)) else {
-            return r;
-        };
-        if dt_s == 0.0 {
-            return r;
-        }
-        let e = v * dt_s;
-        r + Matrix3::from_diagonal(&e.component_mul(&e))
     }
 }

@@ -664,13 +664,10 @@ impl Eskf {
             self.params.gnss_pos_tau_s,
         );
         self.x = Some(x);
-        let r = self.with_position_timing_noise(
-            &mv,
-            white_noise(
-                m,
-                self.params.gnss_pos_correlated_fraction,
-                self.params.gnss_pos_white_min_m,
-            ),
+        let r = white_noise(
+            m,
+            self.params.gnss_pos_correlated_fraction,
+            self.params.gnss_pos_white_min_m,
         );
         // Without a heading the horizontal inertial prediction cannot tell where the vehicle
         // went (its accelerations are rotated by a yaw that is not known), and the yaw held
