@@ -112,6 +112,7 @@ impl HealthWindow {
             },
             reorder_depth: reorder_depth.min(u32::MAX as usize) as u32,
             configured: shared.configured.load(std::sync::atomic::Ordering::Relaxed),
+            gnss_velocity_delay_s: engine.gnss_velocity_delay_s,
         };
         self.since = now;
         self.counts_at_start = counts;
@@ -133,7 +134,8 @@ pub struct HealthReport {
 }
 
 /// Whether `new` says nothing that `prev` did not: the same vehicle, mode, rates, latencies,
-/// test ratios, counters, vision quality, reorder depth and configuration; only the stream time
+/// test ratios, counters, vision quality, reorder depth, configuration and GNSS velocity delay;
+/// only the stream time
 /// and the wall clock may differ.
 pub fn repeats(prev: &pb::VehicleHealth, new: &pb::VehicleHealth) -> bool {
     // Destructured so that a field added to the message must be placed on one side or the other.
@@ -149,6 +151,7 @@ pub fn repeats(prev: &pb::VehicleHealth, new: &pb::VehicleHealth) -> bool {
         vision,
         reorder_depth,
         configured,
+        gnss_velocity_delay_s,
     } = new;
     *vehicle_id == prev.vehicle_id
         && *mode == prev.mode
@@ -159,6 +162,7 @@ pub fn repeats(prev: &pb::VehicleHealth, new: &pb::VehicleHealth) -> bool {
         && *vision == prev.vision
         && *reorder_depth == prev.reorder_depth
         && *configured == prev.configured
+        && *gnss_velocity_delay_s == prev.gnss_velocity_delay_s
 }
 
 /// p50 / p99 / max of the samples (all zero when empty).

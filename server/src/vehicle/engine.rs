@@ -48,6 +48,8 @@ pub struct EngineHealth {
     pub divergence_resets: u64,
     /// IMU samples the estimator found clipped (at the sensor's range) so far.
     pub imu_clipped: u64,
+    /// The GNSS velocity's delay in use, s (`eskf`: learnt from the data).
+    pub gnss_velocity_delay_s: Option<f64>,
 }
 
 /// CPU work for one camera frame, run on the vision pool; its result `V` goes back to the engine

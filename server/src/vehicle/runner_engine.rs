@@ -144,6 +144,7 @@ impl Engine for RunnerEngine {
             engine_dropped: h.inputs_rejected + h.late_dropped + v.abandoned,
             divergence_resets: u64::from(h.divergence_resets),
             imu_clipped: h.imu_clipped,
+            gnss_velocity_delay_s: h.gnss_velocity_delay_s,
         }
     }
 

@@ -134,7 +134,7 @@ async fn zenoh_flight_equals_offline_estimate() {
 }
 
 /// IMU samples at the sensor's range (a hard landing, a strike) are counted by the estimator and
-/// reach the vehicle's health and `/metrics`.
+/// reach the vehicle's health and `/metrics`; the health carries the GNSS velocity delay in use.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn clipped_imu_samples_reach_health_and_metrics() {
     let (config, mut events) = common::sim_flight("smoke", 3.0);
@@ -173,6 +173,16 @@ async fn clipped_imu_samples_reach_health_and_metrics() {
             .encode()
             .contains("uavnav_imu_clipped_total")
     );
+    // The GNSS velocity delay in use rides in the same report: 3 s are too few windows to learn
+    // another, so it is the configured one.
+    let delay = h
+        .shared
+        .latest_health
+        .borrow()
+        .as_ref()
+        .and_then(|r| r.gnss_velocity_delay_s);
+    let configured_s = config.gnss.map_or(0, |g| g.delay_ns) as f64 * 1e-9;
+    assert_eq!(delay, Some(configured_s));
     server.shutdown().await.unwrap();
 }
 
