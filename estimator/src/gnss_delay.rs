@@ -1,12 +1,13 @@
-//! The GNSS receiver's effective delay, learnt from the data (our addition; `eskf` only).
+//! The GNSS velocity's own delay, learnt from the data (our addition; `eskf` only).
 //!
 //! A fix stamped `t` was valid at `t − delay`, and the configured delay (a flight log's
 //! `EK*_GPS_DELAY`, 0.22 s by default on ArduPilot) is what the autopilot assumed, not what the
 //! hardware did. On the public ArduPilot logs the GNSS velocity lags the IMU by 0.16–0.28 s on the
-//! copters but by 0.00–0.04 s on both fixed wings, whose fixes were then fused 0.22 s before they
-//! were valid: a turn at 4 m/s² then reads as a 0.9 m/s velocity error, which the filter puts into
-//! its tilt. The delay is a property of the receiver and of how its messages are stamped, so it
-//! is learnt per vehicle rather than chosen per airframe.
+//! copters but by 0.00–0.04 s on both fixed wings, whose velocities were then fused 0.22 s before
+//! they were valid: a turn at 4 m/s² then reads as a 0.9 m/s velocity error, which the filter puts
+//! into its tilt. The delay is a property of the receiver and of how its messages are stamped, so
+//! it is learnt per vehicle rather than chosen per airframe. Only the velocity's: the positions
+//! keep the configured delay (`eskf/delay.rs` carries each velocity to their time, eq. D2).
 //!
 //! **Eq. D1.** Over a window of stamps `[t0, t1]`, the change of the GNSS velocity equals the
 //! integral of the horizontal kinematic acceleration over the window shifted by the delay `d`:
@@ -16,7 +17,7 @@
 //! `|r(d)|²` over disjoint windows of about a second. The smallest sum, refined by a parabola, is
 //! taken once it beats the delay in use by [`EVIDENCE`] in units of the residual variance (a
 //! hover, whose acceleration is nil, tells nothing and moves nothing). The delay in use then moves
-//! towards it by at most [`STEP_NS`] per fix, so fixes shifted by it stay in time order.
+//! towards it by at most [`STEP_NS`] per fix.
 //!
 //! Lifecycle: windows are taken only while the heading is aligned (the acceleration is rotated by
 //! it) and the IMU runs without gaps ([`GnssDelayLearner::interrupt`] breaks the integral); a
@@ -29,8 +30,8 @@ pub const GRID_STEP_NS: i64 = 20_000_000;
 /// Candidates below the configured delay (0.4 s: a log whose stamps already had 0.22 s taken
 /// off, as the shared flights' folders have, is found at −0.22 s of a configured 0).
 pub const GRID_BELOW: usize = 20;
-/// Candidates above the configured delay (0.1 s, half of the fusion horizon's allowance for
-/// measurements arriving late, so that a longer delay learnt still leaves them room).
+/// Candidates above the configured delay (0.1 s: a velocity older than its position is carried
+/// forward from the few samples kept behind the horizon, the rest at the oldest one's value).
 pub const GRID_ABOVE: usize = 5;
 const GRID_LEN: usize = GRID_BELOW + GRID_ABOVE + 1;
 /// The window between the two fixes of a pair, ns: long enough for the acceleration to build a
@@ -60,8 +61,8 @@ pub const FORGET: f64 = 0.99;
 /// A window whose best residual is larger than this, m/s, is left out: a GNSS glitch or an
 /// integration broken by something else says nothing about the delay.
 pub const MAX_RESIDUAL_MPS: f64 = 1.5;
-/// The largest change of the delay in use per fix, ns (fixes come ≥ 50 ms apart, so their
-/// shifted times keep their order).
+/// The largest change of the delay in use per fix, ns: the velocity's correction changes
+/// smoothly, by at most `|a| · 20 ms` from one fix to the next.
 pub const STEP_NS: i64 = 20_000_000;
 
 /// A pair of GNSS velocities waiting for the integral to cover it.

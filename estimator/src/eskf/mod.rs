@@ -126,7 +126,7 @@ pub struct Eskf {
     first_imu_t_ns: Option<i64>,
     /// The position hold of a filter without position aiding.
     hold: PositionHold,
-    /// The GNSS receiver's effective delay (eq. D1; `delay.rs`).
+    /// The GNSS velocity's own delay, learnt (eq. D1; `delay.rs`).
     gnss_delay: GnssDelayLearner,
 }
 
