@@ -7,9 +7,9 @@
 //! they were valid: a turn at 4 m/s² then reads as a 0.9 m/s velocity error, which the filter puts
 //! into its tilt. The delay is a property of the receiver and of how its messages are stamped, so
 //! it is learnt per vehicle rather than chosen per airframe. Only the velocity's: the positions
-//! keep the configured delay (`eskf/delay.rs` carries each velocity to their time, eq. D2).
+//! keep the configured delay (`eskf/delay.rs` carries each velocity to their time, eq. L2).
 //!
-//! **Eq. D1.** Over a window of stamps `[t0, t1]`, the change of the GNSS velocity equals the
+//! **Eq. L1.** Over a window of stamps `[t0, t1]`, the change of the GNSS velocity equals the
 //! integral of the horizontal kinematic acceleration over the window shifted by the delay `d`:
 //! `r(d) = (v(t1) − v(t0)) − ∫_{t0−d}^{t1−d} a dt`, `a = (R(q) (f − b_a))_{NE}` (the specific
 //! force rotated by the filter's attitude at the horizon less its accelerometer bias; gravity has
@@ -87,7 +87,7 @@ pub struct DelayDiag {
     pub evidence: f64,
 }
 
-/// Learns the effective GNSS delay (eq. D1).
+/// Learns the effective GNSS delay (eq. L1).
 #[derive(Debug, Clone, PartialEq)]
 pub struct GnssDelayLearner {
     configured_ns: i64,

@@ -45,7 +45,7 @@ pub struct Health {
     /// IMU intervals with a clipped (saturated) accelerometer or gyro axis (`eskf`; handled by
     /// extra process noise).
     pub imu_clipped: u64,
-    /// The GNSS velocity's delay in use, s (`eskf`: the configured one until eq. D1 learns
+    /// The GNSS velocity's delay in use, s (`eskf`: the configured one until eq. L1 learns
     /// another, `crate::gnss_delay`; `None` for `paper`, which uses the configured one).
     pub gnss_velocity_delay_s: Option<f64>,
     /// Covariance diagonal of the error state (layout: [`crate::state::STATE_LABELS`] for `eskf`;

@@ -15,7 +15,7 @@
 //! | [`prediction`] | strapdown mechanization (eqs. 29–31) and block-sparse covariance prediction |
 //! | [`aid_sources`] | GNSS position (eq. 32), GNSS velocity (eq. 33), magnetometer heading (eq. M1), vision; gated updates |
 //! | [`buffer`] | the delayed-measurement buffer |
-//! | [`gnss_delay`] | the GNSS receiver's effective delay learnt from the data (eq. D1) |
+//! | [`gnss_delay`] | the GNSS velocity's own delay learnt from the data (eq. L1) |
 //! | [`output_predictor`] | a pose for every IMU sample from the delayed filter |
 //! | [`init`] | alignment without operator input |
 //! | [`yaw_estimator`] | heading without a magnetometer: a Gaussian sum of yaw hypotheses fed by GNSS velocity |

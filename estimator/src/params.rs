@@ -171,9 +171,9 @@ pub struct EstimatorParams {
     /// that flies nose first (a fixed wing); a multirotor flies sideways and backwards, so the
     /// default is `false` and the heading comes from the magnetometer or the yaw estimator.
     pub course_heading: bool,
-    /// Learn the GNSS velocity's own delay from the data (`eskf`; eq. D1, `crate::gnss_delay`),
+    /// Learn the GNSS velocity's own delay from the data (`eskf`; eq. L1, `crate::gnss_delay`),
     /// starting from the configured one, and fuse each velocity carried to its fix's configured
-    /// time of validity (eq. D2; positions keep the configured delay): the delay an autopilot's
+    /// time of validity (eq. L2; positions keep the configured delay): the delay an autopilot's
     /// log states is what it assumed, and on the public ArduPilot logs the fixed wings'
     /// velocities lagged their IMU by 0.00–0.04 s where 0.22 s was stated.
     pub learn_gnss_delay: bool,

@@ -183,7 +183,7 @@ fn plane_e() {
     assert!(s.horizontal_rmse_m <= 2.0, "{s}");
 }
 
-/// Eq. D1 on the shared flights, whose fix stamps had the autopilot's 0.22 s taken off (their
+/// Eq. L1 on the shared flights, whose fix stamps had the autopilot's 0.22 s taken off (their
 /// configured delay is 0). A cross-correlation of the fixes' velocity changes with the specific
 /// force integrated with the autopilot's attitude puts the copter's velocity 0.16–0.20 s behind
 /// its IMU and the plane's 0.00–0.04 s, so the plane's velocities are valid about 0.2 s after

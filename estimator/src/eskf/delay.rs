@@ -1,8 +1,8 @@
-//! The GNSS velocity's own delay ([`crate::gnss_delay`], eq. D1) in the filter: the learner fed
-//! from the horizon, and each fix's velocity carried to the time it is fused at (eq. D2).
+//! The GNSS velocity's own delay ([`crate::gnss_delay`], eq. L1) in the filter: the learner fed
+//! from the horizon, and each fix's velocity carried to the time it is fused at (eq. L2).
 //!
 //! A fix is fused at its stamp less the configured delay, position and velocity together. The
-//! learner measures only the velocity's delay (the position's is not seen by eq. D1, and receivers
+//! learner measures only the velocity's delay (the position's is not seen by eq. L1, and receivers
 //! differ there: on one surveyed copter the velocity lagged the position by 0.2 s), so the
 //! position keeps the configured delay and the velocity is moved to the fusion time.
 
@@ -56,7 +56,7 @@ impl Eskf {
         }
     }
 
-    /// Eq. D2: the fix's velocity at its fusion time `t_f` (the stamp less the configured delay),
+    /// Eq. L2: the fix's velocity at its fusion time `t_f` (the stamp less the configured delay),
     /// from its own time of validity `t_v` (the stamp less the learnt velocity delay):
     /// `v(t_f) = v(t_v) − ∫_{t_f}^{t_v} (R(q) (f − b_a) + g) dt`, the specific force of the IMU
     /// samples around the horizon rotated by the horizon's attitude (a turn of 0.3 rad/s moves it

@@ -126,7 +126,7 @@ pub struct Eskf {
     first_imu_t_ns: Option<i64>,
     /// The position hold of a filter without position aiding.
     hold: PositionHold,
-    /// The GNSS velocity's own delay, learnt (eq. D1; `delay.rs`).
+    /// The GNSS velocity's own delay, learnt (eq. L1; `delay.rs`).
     gnss_delay: GnssDelayLearner,
 }
 
@@ -650,7 +650,7 @@ impl Eskf {
     fn fuse_gnss(&mut self, m: &GnssMeas, gyro_b: &Vector3<f64>, gyro_var_radps2: f64) {
         self.feed_yaw_estimator(m);
         self.manage_heading(m);
-        // The velocity at the fusion time, from its own time of validity (eq. D2).
+        // The velocity at the fusion time, from its own time of validity (eq. L2).
         let mv = self.velocity_at_fusion_time(m);
         self.gnss_vel
             .observe(&mv, &self.params.gnss_vel_consistency);
