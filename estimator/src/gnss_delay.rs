@@ -149,7 +149,8 @@ impl GnssDelayLearner {
     }
 
     fn candidate_ns(&self, i: usize) -> i64 {
-        self.configured_ns + (i as i64 - GRID_BELOW as i64) * GRID_STEP_NS
+        self.configured_ns
+            .saturating_add((i as i64 - GRID_BELOW as i64) * GRID_STEP_NS)
     }
 
     /// The integral can no longer be continued (heading not aligned, IMU gap, filter restart).
@@ -169,11 +170,15 @@ impl GnssDelayLearner {
             self.knots.clear();
             self.knots.push_back((t0_ns, self.cum));
         }
-        let dt_s = (t1_ns - t0_ns) as f64 * 1e-9;
+        let dt_s = t1_ns.saturating_sub(t0_ns) as f64 * 1e-9;
         self.cum[0] += a_ne[0] * dt_s;
         self.cum[1] += a_ne[1] * dt_s;
         self.cum_t_ns = Some(t1_ns);
-        if self.knots.back().is_none_or(|k| t1_ns - k.0 >= KNOT_NS) {
+        if self
+            .knots
+            .back()
+            .is_none_or(|k| t1_ns.saturating_sub(k.0) >= KNOT_NS)
+        {
             if self.knots.len() >= MAX_KNOTS {
                 self.knots.pop_front();
             }
@@ -182,7 +187,7 @@ impl GnssDelayLearner {
         while self
             .knots
             .front()
-            .is_some_and(|k| t1_ns - k.0 > KNOT_SPAN_NS)
+            .is_some_and(|k| t1_ns.saturating_sub(k.0) > KNOT_SPAN_NS)
         {
             self.knots.pop_front();
         }
@@ -192,8 +197,12 @@ impl GnssDelayLearner {
     /// Adds a GNSS velocity (north, east, m/s) at its stamp (as it arrived, before any delay is
     /// taken off), then moves the delay in use one step towards the learnt one.
     pub fn push_velocity(&mut self, stamp_ns: i64, v_ne: [f64; 2]) {
-        match self.anchor {
-            Some((t0, v0)) if stamp_ns - t0 >= WINDOW_NS && stamp_ns - t0 <= MAX_WINDOW_NS => {
+        // Saturating: stamps are only known to increase, not to be near each other.
+        match self
+            .anchor
+            .map(|(t0, v0)| (t0, v0, stamp_ns.saturating_sub(t0)))
+        {
+            Some((t0, v0, span)) if (WINDOW_NS..=MAX_WINDOW_NS).contains(&span) => {
                 if self.pending.len() >= MAX_PENDING {
                     self.pending.pop_front();
                 }
@@ -205,11 +214,14 @@ impl GnssDelayLearner {
                 });
                 self.anchor = Some((stamp_ns, v_ne));
             }
-            Some((t0, _)) if stamp_ns > t0 && stamp_ns - t0 < WINDOW_NS => {}
+            Some((_, _, span)) if span > 0 && span < WINDOW_NS => {}
             _ => self.anchor = Some((stamp_ns, v_ne)),
         }
-        let step = (self.target_ns - self.delay_ns).clamp(-STEP_NS, STEP_NS);
-        self.delay_ns += step;
+        let step = self
+            .target_ns
+            .saturating_sub(self.delay_ns)
+            .clamp(-STEP_NS, STEP_NS);
+        self.delay_ns = self.delay_ns.saturating_add(step);
     }
 
     /// The integral at `t_ns`, interpolated between knots; `None` outside them.
@@ -235,7 +247,7 @@ impl GnssDelayLearner {
         };
         let lo = self.candidate_ns(0);
         while let Some(w) = self.pending.front().copied() {
-            if w.t1_ns - lo > last_t {
+            if w.t1_ns.saturating_sub(lo) > last_t {
                 return; // the horizon has not reached the window's latest shift yet
             }
             self.pending.pop_front();
@@ -243,9 +255,10 @@ impl GnssDelayLearner {
             let mut covered = true;
             for (i, r) in r2.iter_mut().enumerate() {
                 let d = self.candidate_ns(i);
-                let (Some(a), Some(b)) =
-                    (self.integral_at(w.t0_ns - d), self.integral_at(w.t1_ns - d))
-                else {
+                let (Some(a), Some(b)) = (
+                    self.integral_at(w.t0_ns.saturating_sub(d)),
+                    self.integral_at(w.t1_ns.saturating_sub(d)),
+                ) else {
                     covered = false;
                     break;
                 };
@@ -271,7 +284,7 @@ impl GnssDelayLearner {
 
     /// The cost at `d_ns`, interpolated linearly on the grid.
     fn cost_at(&self, d_ns: i64) -> f64 {
-        let x = (d_ns - self.candidate_ns(0)) as f64 / GRID_STEP_NS as f64;
+        let x = d_ns.saturating_sub(self.candidate_ns(0)) as f64 / GRID_STEP_NS as f64;
         let x = x.clamp(0.0, (GRID_LEN - 1) as f64);
         let i = (x.floor() as usize).min(GRID_LEN - 2);
         let w = x - i as f64;
@@ -367,6 +380,18 @@ mod tests {
     fn a_vehicle_that_does_not_accelerate_moves_nothing() {
         let l = learn(220_000_000, 0, 0.0);
         assert_eq!(l.delay_ns(), 220_000_000, "{:?}", l.diag());
+    }
+
+    #[test]
+    fn extreme_stamps_neither_overflow_nor_move_the_delay() {
+        let mut l = GnssDelayLearner::new(200_000_000);
+        l.push_velocity(i64::MIN + 1, [0.0, 0.0]);
+        l.push_velocity(i64::MAX, [1.0, 0.0]);
+        l.push_accel(i64::MIN, i64::MIN + 10, [1.0, 0.0]);
+        l.push_accel(i64::MAX - 10, i64::MAX, [1.0, 0.0]);
+        l.push_velocity(i64::MAX, [1.0, 0.0]);
+        assert_eq!(l.delay_ns(), 200_000_000);
+        assert_eq!(l.cost_at(i64::MIN), 0.0);
     }
 
     #[test]

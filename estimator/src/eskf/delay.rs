@@ -63,7 +63,10 @@ impl Eskf {
     /// 4° in 0.22 s), the part beyond the newest sample taken at that sample's value. Unchanged
     /// while the delays agree or the heading is not known.
     pub(super) fn velocity_at_fusion_time(&self, m: &GnssMeas) -> GnssMeas {
-        let offset_ns = self.gnss_delay.configured_ns() - self.gnss_delay.delay_ns();
+        let offset_ns = self
+            .gnss_delay
+            .configured_ns()
+            .saturating_sub(self.gnss_delay.delay_ns());
         let (Some(v), Some(x), Some(frame)) = (m.vel_ned_mps, self.x.as_ref(), self.frame.as_ref())
         else {
             return *m;
@@ -74,9 +77,9 @@ impl Eskf {
         let g = frame.gravity_ned(&x.p);
         let accel = |s: &ImuSample| x.q * (s.accel_mps2 - x.ba) + g;
         let (t0, t1) = if offset_ns > 0 {
-            (m.t_ns, m.t_ns + offset_ns)
+            (m.t_ns, m.t_ns.saturating_add(offset_ns))
         } else {
-            (m.t_ns + offset_ns, m.t_ns)
+            (m.t_ns.saturating_add(offset_ns), m.t_ns)
         };
         let mut dv = Vector3::zeros();
         let mut covered_ns = 0i64;
@@ -85,11 +88,11 @@ impl Eskf {
             let (lo, hi) = (s0.t_ns.max(t0), s1.t_ns.min(t1));
             if hi > lo {
                 dv += (accel(s0) + accel(s1)) * (0.5 * (hi - lo) as f64 * 1e-9);
-                covered_ns += hi - lo;
+                covered_ns = covered_ns.saturating_add(hi - lo);
             }
         }
         // What the samples do not cover, at the nearest one's value.
-        let uncovered_ns = (t1 - t0) - covered_ns;
+        let uncovered_ns = t1.saturating_sub(t0).saturating_sub(covered_ns);
         if uncovered_ns > 0 {
             let nearest = if offset_ns > 0 {
                 samples().last()
