@@ -14,13 +14,7 @@ use crate::aid_sources::gnss_pos::GnssMeas;
 use crate::gnss_delay::DelayDiag;
 
 impl Eskf {
-    /// The GNSS velocity's delay in use, ns: the configured one, or the one learnt from the data
-    /// (`EstimatorParams::learn_gnss_delay`).
-    pub fn gnss_velocity_delay_ns(&self) -> i64 {
-        self.gnss_delay.delay_ns()
-    }
-
-    /// The delay learner's diagnostics.
+    /// The delay learner's diagnostics (the delay in use is also in `Health`).
     pub fn gnss_delay_diag(&self) -> DelayDiag {
         self.gnss_delay.diag()
     }
