@@ -211,6 +211,24 @@ pub fn rotation_disproved<'a>(
     would_rad >= 3.0 * noise_rad && f_a.angle(&f_b_last) < 0.5 * would_rad
 }
 
+/// The gyro's bias from a levelling window of `(t_ns, gyro, accel)` samples taken at rest (a
+/// start without GNSS): the mean gyro, when it is small ([`START_BIAS_MAX_RADPS`]) or the
+/// accelerometer disproves the rotation ([`rotation_disproved`]), with the mean's own noise per
+/// axis (the samples' spread over `√(3n)`); `None` for a turn. `f_b` is the window's mean
+/// specific force, `g` gravity's magnitude and `spread` the specific force's RMS spread.
+pub fn gyro_bias_at_rest<'a>(
+    samples: impl ExactSizeIterator<Item = &'a (i64, Vector3<f64>, Vector3<f64>)> + Clone,
+    f_b: &Vector3<f64>,
+    g: f64,
+    spread: f64,
+) -> Option<(Vector3<f64>, f64)> {
+    let n = samples.len() as f64;
+    let (w_b, gyro_spread) = mean_and_spread(samples.clone().map(|s| s.1));
+    let still = w_b.norm() <= START_BIAS_MAX_RADPS
+        || rotation_disproved(samples, f_b, &w_b, g, spread, gyro_spread);
+    still.then(|| (w_b, gyro_spread / (3.0 * n).sqrt()))
+}
+
 impl Initialiser {
     /// Starts without a GNSS fix, at `p_ned` (the hold point) with zero velocity, levelled on the
     /// mean specific force taken as gravity alone (no GNSS to measure an acceleration): a tilt σ
@@ -229,7 +247,6 @@ impl Initialiser {
         if ((t_last - t_first) as f64) < 0.8 * params.init_level_window_s * 1e9 {
             return None;
         }
-        let n = self.samples.len() as f64;
         let (f_b, spread) = mean_and_spread(self.samples.iter().map(|s| s.2));
         let q = attitude_from_gravity(&f_b, g_n, 0.0)?;
         let g = g_n.norm();
@@ -238,15 +255,8 @@ impl Initialiser {
         // GNSS the bias is learnt from the velocity in seconds, without it only slowly through
         // the tilt, and a MEMS turn-on bias of a few °/s would tilt the attitude by tens of
         // degrees first (EuRoC's IMU: 0.08 rad/s about one axis).
-        let (w_b, gyro_spread) = mean_and_spread(self.samples.iter().map(|s| s.1));
-        let still = w_b.norm() <= START_BIAS_MAX_RADPS
-            || rotation_disproved(self.samples.iter(), &f_b, &w_b, g, spread, gyro_spread);
-        // The mean's own noise, per axis.
-        let bias_sigma = if still {
-            params.init_gyro_bias_sigma_radps + gyro_spread / (3.0 * n).sqrt()
-        } else {
-            params.init_gyro_bias_sigma_radps
-        };
+        let still = gyro_bias_at_rest(self.samples.iter(), &f_b, g, spread);
+        let bias_sigma = params.init_gyro_bias_sigma_radps + still.map_or(0.0, |b| b.1);
         let mut cov = Cov::zeros();
         for k in 0..3 {
             cov[(IP + k, IP + k)] = pos_sigma_m.powi(2);
@@ -264,7 +274,7 @@ impl Initialiser {
             p: *p_ned,
             v: Vector3::zeros(),
             q,
-            bg: if still { w_b } else { Vector3::zeros() },
+            bg: still.map_or_else(Vector3::zeros, |b| b.0),
             ba: Vector3::zeros(),
             gm: Vector3::zeros(),
             clone: None,
@@ -278,7 +288,7 @@ impl Initialiser {
 }
 
 /// The mean of some vectors and their RMS distance from it (zeros for none).
-fn mean_and_spread(v: impl Iterator<Item = Vector3<f64>> + Clone) -> (Vector3<f64>, f64) {
+pub fn mean_and_spread(v: impl Iterator<Item = Vector3<f64>> + Clone) -> (Vector3<f64>, f64) {
     let n = v.clone().count().max(1) as f64;
     let mean = v.clone().sum::<Vector3<f64>>() / n;
     let spread = (v.map(|x| (x - mean).norm_squared()).sum::<f64>() / n).sqrt();

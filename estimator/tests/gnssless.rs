@@ -1,12 +1,13 @@
-//! The `eskf` without GNSS (`eskf::gnssless`) on the simulated multirotor
+//! Both profiles without GNSS (`eskf::gnssless`, `paper::gnssless`) on the simulated multirotor
 //! (`scenarios/multirotor.toml`: hover, yaw in place, forward, sideways and backward flight, an
-//! aggressive dash): attitude only, roll and pitch held by gravity, the heading by the compass;
-//! and a flight whose GNSS comes late runs from its first fix exactly as if the filter had waited.
+//! aggressive dash): attitude only, roll and pitch held by gravity, the heading by the compass
+//! (`eskf`; `paper` reads none and says the heading is unknown); and a flight whose GNSS comes
+//! late runs from its first fix exactly as if the filter had waited.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
 use uavnav_core::rotation::euler_error;
 use uavnav_core::truth::truth_at;
-use uavnav_core::{Mode, VehicleConfig};
+use uavnav_core::{FilterProfile, Mode, VehicleConfig};
 use uavnav_estimator::{Estimator, EstimatorParams, PoseOutput};
 use uavnav_sim::{Flight, Scenario};
 
@@ -108,8 +109,17 @@ fn without_gnss_the_attitude_is_held_by_gravity_and_the_compass() {
 
 #[test]
 fn a_late_first_fix_starts_the_filter_as_if_it_had_waited() {
+    for profile in [FilterProfile::Eskf, FilterProfile::Paper] {
+        late_first_fix(profile);
+    }
+}
+
+fn late_first_fix(profile: FilterProfile) {
     let f = flight();
-    let config = f.vehicle_config();
+    let config = VehicleConfig {
+        profile,
+        ..f.vehicle_config()
+    };
     let late = f.imu()[0].t_ns + 25 * S;
     let waited = EstimatorParams {
         start_without_gnss_after_s: f64::INFINITY,
@@ -132,6 +142,47 @@ fn a_late_first_fix_starts_the_filter_as_if_it_had_waited() {
         .filter(|p| p.t_ns >= first_fix_pose)
         .copied()
         .collect();
-    assert_eq!(rest.len(), without.len());
-    assert!(rest == without, "the poses after the first fix differ");
+    assert_eq!(rest.len(), without.len(), "{profile:?}");
+    assert!(
+        rest == without,
+        "{profile:?}: the poses after the first fix differ"
+    );
+}
+
+#[test]
+fn the_paper_profile_without_gnss_holds_roll_and_pitch_and_says_the_heading_is_unknown() {
+    let f = flight();
+    let config = VehicleConfig {
+        gnss: None,
+        profile: FilterProfile::Paper,
+        ..f.vehicle_config()
+    };
+    let mut est = Estimator::new(&config, EstimatorParams::default(), None);
+    let poses = fly(&mut est, &f, None);
+    let t0 = f.imu()[0].t_ns;
+    // Started once level (the paper's levelling window at 200 Hz), attitude only throughout.
+    assert!(poses.first().unwrap().t_ns - t0 < 2 * S, "first pose late");
+    assert!(poses.iter().all(|p| p.health.mode == Mode::AttitudeOnly));
+    assert!(
+        poses
+            .iter()
+            .all(|p| p.sigma_att_rad.iter().all(|s| s.is_finite() && *s > 0.0))
+    );
+    let (rmse, within) = attitude_scores(&f, &poses, t0 + 30 * S);
+    let deg = rmse.map(f64::to_degrees);
+    eprintln!(
+        "paper, multirotor without GNSS: roll/pitch/yaw RMSE {:.2}/{:.2}/{:.2} deg, {:.1} % within 3 sigma",
+        deg[0],
+        deg[1],
+        deg[2],
+        100.0 * within
+    );
+    assert!(deg[0] < 3.0 && deg[1] < 3.0, "{deg:?}");
+    assert!(within >= 0.95, "{within}");
+    // No compass in this profile: the heading stays unknown, and its σ says so.
+    let last = poses.last().unwrap();
+    assert!(last.sigma_att_rad.z > 1.0, "{}", last.sigma_att_rad.z);
+    let h = est.health();
+    assert!(h.gnss_tilt.fused > 10, "{:?}", h.gnss_tilt);
+    assert_eq!(h.divergence_resets, 0);
 }

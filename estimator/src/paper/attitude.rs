@@ -100,6 +100,24 @@ impl AttitudeEkf {
         }
     }
 
+    /// Keeps each Euler angle's variance at most `max_var`, rad², by scaling that angle's row
+    /// and column of the covariance (`D P D` with a positive diagonal `D`: it stays positive
+    /// semi-definite and the correlations are kept). Near ±90° of pitch, roll and yaw lose their
+    /// meaning and the propagation grows their variance without bound (10¹³ rad² on a tumbling
+    /// copter without GNSS, where the next update then left negative variances).
+    pub fn cap_euler_variance(&mut self, max_var: f64) {
+        for i in 0..3 {
+            let v = self.p[(i, i)];
+            if v > max_var {
+                let k = (max_var / v).sqrt();
+                for j in 0..6 {
+                    self.p[(i, j)] *= k;
+                    self.p[(j, i)] *= k;
+                }
+            }
+        }
+    }
+
     /// Covariance of the Euler angles, rad².
     pub fn p_euler(&self) -> Matrix3<f64> {
         self.p.fixed_view::<3, 3>(0, 0).into_owned()

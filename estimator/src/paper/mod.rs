@@ -9,6 +9,7 @@
 //! | this file | the three filters' state, IMU stepping, GNSS fixes, alignment, divergence check |
 //! | [`gnss_tilt`] | our addition: roll/pitch from the GNSS acceleration while no video chain runs |
 //! | [`heading`] | our addition: a multirotor's heading from the yaw-hypothesis bank |
+//! | `gnssless` | our addition: attitude only until the first usable fix |
 //! | `video` | egomotion in: eq. (34), eq. (D1) while GNSS is fused, eq. (35) in outages |
 //! | `report` | motion prior, health and the pose output with its stated σ |
 //!
@@ -43,6 +44,7 @@
 
 pub mod attitude;
 pub mod gnss_tilt;
+mod gnssless;
 pub mod heading;
 pub mod posvel;
 mod report;
@@ -140,6 +142,14 @@ pub struct PaperFilter {
     gnss_tilt: gnss_tilt::GnssTilt,
     /// The heading from the yaw-hypothesis bank (`heading`, our addition).
     heading: heading::BankHeading,
+    /// The configuration has a receiver (without one the start without GNSS is at once).
+    has_gnss: bool,
+    /// Time of the first IMU sample, ns (the wait before starting without GNSS).
+    first_imu_t_ns: Option<i64>,
+    /// Running without GNSS (`gnssless`, our addition): attitude only.
+    gnssless: bool,
+    /// The frame is `gnssless`'s provisional one (no origin configured, no fix yet).
+    frame_provisional: bool,
 }
 
 /// Roll or pitch this far from the accelerometer's tilt (with the GNSS acceleration removed) for
@@ -221,6 +231,10 @@ impl PaperFilter {
             divergence_resets: 0,
             gnss_tilt: gnss_tilt::GnssTilt::default(),
             heading,
+            has_gnss: config.gnss.is_some(),
+            first_imu_t_ns: None,
+            gnssless: false,
+            frame_provisional: false,
         };
         if let Some(o) = origin {
             s.set_frame(o);
@@ -256,6 +270,9 @@ impl PaperFilter {
         fresh.observed_psd = (0.0, 0.0);
         fresh.gnss_tilt = gnss_tilt::GnssTilt::default();
         fresh.heading.restart();
+        fresh.first_imu_t_ns = None;
+        fresh.gnssless = false;
+        fresh.frame_provisional = false;
         *self = fresh;
         if let Some(o) = cfg_frame {
             self.set_frame(o);
@@ -281,16 +298,24 @@ impl PaperFilter {
         }
         self.f_sum.0 += s.accel_mps2;
         self.f_sum.1 += 1;
-        if self.att.is_none() {
+        // Also while running without GNSS: the first fix then levels from the latest window,
+        // as it would have had the filters waited for it.
+        if self.att.is_none() || self.gnssless {
             self.init_f.push_back(s.accel_mps2);
             let keep = (self.params.init_level_window_s * 200.0).max(10.0) as usize;
             while self.init_f.len() > keep {
                 self.init_f.pop_front();
             }
         }
+        if self.att.is_none() {
+            self.try_start_without_gnss(s.t_ns);
+        }
         let (Some(prev), Some(frame)) = (prev, self.frame) else {
             return None;
         };
+        if self.gnssless {
+            return self.step_gnssless(&prev, s, &frame);
+        }
         let (Some(att), Some(gi)) = (self.att.as_mut(), self.gps_imu.as_mut()) else {
             return None;
         };
@@ -360,6 +385,9 @@ impl PaperFilter {
     /// GNSS fix: GPS-IMU update (eqs. 32–33), attitude aiding without video, initialisation.
     pub fn push_gnss(&mut self, fix: &GnssFix) {
         let lla = Lla::from_deg(fix.lat_deg, fix.lon_deg, fix.alt_m);
+        if fix.velocity.and_then(|v| v.ned_mps()).is_some() {
+            self.leave_gnssless();
+        }
         if self.frame.is_none() {
             self.set_frame(lla);
         }
@@ -533,6 +561,11 @@ impl PaperFilter {
         self.divergence_resets
     }
 
+    /// Enough specific force for the levelling (most of `init_level_window_s` at 200 Hz).
+    fn levelling_window_full(&self) -> bool {
+        (self.init_f.len() as f64) >= 0.8 * self.params.init_level_window_s * 200.0
+    }
+
     fn try_init(
         &mut self,
         meas: &GnssMeas,
@@ -541,7 +574,7 @@ impl PaperFilter {
         a_n: &Vector3<f64>,
         gyro: &Vector3<f64>,
     ) {
-        if (self.init_f.len() as f64) < 0.8 * self.params.init_level_window_s * 200.0 {
+        if !self.levelling_window_full() {
             return;
         }
         let f_b = self.init_f.iter().sum::<Vector3<f64>>() / self.init_f.len() as f64;

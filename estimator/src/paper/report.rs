@@ -58,6 +58,8 @@ impl PaperFilter {
         let t = self.imu.back().map(|s| s.t_ns).unwrap_or(0);
         let to = self.params.aid_timeout_ns;
         h.mode = match (&self.att, &self.gps_imu) {
+            (Some(att), _) if !att.euler.iter().all(|v| v.is_finite()) => Mode::Diverged,
+            (Some(_), None) if self.gnssless => Mode::AttitudeOnly,
             (Some(_), Some(gi)) if !gi.x.iter().all(|v| v.is_finite()) => Mode::Diverged,
             (Some(_), Some(_)) if h.gnss_pos.active(t, to) => Mode::Nominal,
             (Some(_), Some(_)) if self.vio2.is_some() && h.vision_trans.active(t, to) => {
@@ -66,10 +68,11 @@ impl PaperFilter {
             (Some(_), Some(_)) => Mode::InertialOnly,
             _ => Mode::Initialising,
         };
-        if let (Some(att), Some(gi)) = (&self.att, &self.gps_imu) {
-            let pv = self.vio2.as_ref().unwrap_or(gi);
-            for k in 0..6 {
-                h.cov_diag[k] = pv.p[(k, k)];
+        if let Some(att) = &self.att {
+            if let Some(pv) = self.vio2.as_ref().or(self.gps_imu.as_ref()) {
+                for k in 0..6 {
+                    h.cov_diag[k] = pv.p[(k, k)];
+                }
             }
             for k in 0..3 {
                 h.cov_diag[6 + k] = att.p[(k, k)];
@@ -78,7 +81,45 @@ impl PaperFilter {
         h
     }
 
+    /// The pose without GNSS (`gnssless`): attitude only; the position fields are the frame's
+    /// origin and are not reported ([`Mode::AttitudeOnly`]).
+    fn output_attitude_only(&self, t_ns: i64, att: &AttitudeEkf, frame: &LocalFrame) -> PoseOutput {
+        let h = self.health();
+        let to = self.params.aid_timeout_ns;
+        let sigma_att = reported_euler_sigma(att);
+        // Not reported (the mode says so); kept finite, as every published number is: the
+        // velocity is the one the tilt windows hold at zero, the position is unknown.
+        let sigma_vel = Vector3::repeat(self.params.paper_noaid_speed_sigma_mps);
+        let sigma_pos = Vector3::repeat(self.params.diverged_pos_sigma_m);
+        PoseOutput {
+            t_ns,
+            lla: frame.ned_to_lla(&Vector3::zeros()),
+            pos_ned_m: Vector3::zeros(),
+            vel_ned_mps: Vector3::zeros(),
+            nav_from_body: att.quaternion(),
+            euler_rad: crate::output::canonical_euler(&att.euler),
+            sigma_pos_ned_m: sigma_pos,
+            sigma_vel_mps: sigma_vel,
+            sigma_att_rad: sigma_att,
+            gyro_bias_radps: Vector3::zeros(),
+            accel_bias_mps2: Vector3::zeros(),
+            health: (&h).into(),
+            aiding: AidingFlags {
+                gnss_pos: false,
+                gnss_vel: false,
+                vision_rot: h.vision_rot.active(t_ns, to),
+                vision_trans: false,
+            },
+        }
+    }
+
     pub(super) fn output(&self, t_ns: i64) -> Option<PoseOutput> {
+        if self.gnssless {
+            let (Some(att), Some(frame)) = (self.att.as_ref(), self.frame.as_ref()) else {
+                return None;
+            };
+            return Some(self.output_attitude_only(t_ns, att, frame));
+        }
         let (Some(att), Some(gi), Some(frame)) = (
             self.att.as_ref(),
             self.gps_imu.as_ref(),
@@ -98,7 +139,7 @@ impl PaperFilter {
         let h = self.health();
         let to = self.params.aid_timeout_ns;
         let sd = |m: &Matrix3<f64>| m.diagonal().map(|v| v.max(0.0).sqrt());
-        let mut sigma_att = sd(&att.p_euler());
+        let mut sigma_att = reported_euler_sigma(att);
         if !att.video_active() {
             sigma_att.z = sigma_att.z.max(self.heading.reported_sigma_floor_rad());
         }
@@ -123,4 +164,14 @@ impl PaperFilter {
             },
         })
     }
+}
+
+/// The Euler angles' σ as reported: at most that of an angle uniform round the circle
+/// (`UNALIGNED_YAW_SIGMA_RAD`, 104°). Near ±90° of pitch the roll and yaw of an Euler-angle
+/// filter lose their meaning and its covariance grows without bound (10⁸ ° on a tumbling
+/// survey copter without GNSS); beyond that cap the angle is simply unknown.
+fn reported_euler_sigma(att: &AttitudeEkf) -> Vector3<f64> {
+    att.p_euler()
+        .diagonal()
+        .map(|v| v.max(0.0).sqrt().min(crate::init::UNALIGNED_YAW_SIGMA_RAD))
 }
