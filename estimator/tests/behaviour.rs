@@ -656,3 +656,55 @@ fn the_gnss_tilt_source_is_in_the_health_of_the_profile_that_has_it() {
             .all(|o| o.health.gnss_tilt == Default::default())
     );
 }
+
+/// A receiver that gives ground speed and course but no vertical velocity (MAVLink's
+/// `GPS_RAW_INT`, NMEA's RMC): the `paper` profile aligns and fuses it (before, it left every
+/// such fix out and never started), with the attitude close to what the 3-D velocity gives.
+#[test]
+fn the_paper_profile_fuses_fixes_without_a_vertical_velocity() {
+    let flight = Flight::new(&scenario("smoke", None)).unwrap();
+    let mut vc = flight.vehicle_config();
+    vc.profile = FilterProfile::Paper;
+    vc.camera = None;
+    let fly = |drop_vertical: bool| {
+        let mut est = Estimator::new(&vc, EstimatorParams::default(), Some(flight.origin()));
+        let mut fixes = flight.gnss().iter().peekable();
+        let mut outs = Vec::new();
+        for s in flight.imu() {
+            while let Some(f) = fixes.next_if(|f| f.t_ns <= s.t_ns) {
+                let mut f = *f;
+                if drop_vertical && let Some(v) = f.velocity.as_mut() {
+                    v.down_mps = None;
+                }
+                est.push_gnss(&f).unwrap();
+            }
+            if let Some(o) = est.push_imu(s).unwrap() {
+                outs.push(o);
+            }
+        }
+        outs
+    };
+    let tilt_rms_deg = |outs: &[uavnav_estimator::PoseOutput]| {
+        let t_from = flight.imu()[0].t_ns + 5_000_000_000;
+        let (mut sq, mut n) = (0.0, 0);
+        for o in outs.iter().filter(|o| o.t_ns >= t_from) {
+            let t = truth_at(flight.truth(), o.t_ns).unwrap();
+            let e = euler_error(&o.nav_from_body, &t.nav_from_body);
+            sq += e.x * e.x + e.y * e.y;
+            n += 2;
+        }
+        (sq / n as f64).sqrt().to_degrees()
+    };
+    let full = fly(false);
+    let horizontal = fly(true);
+    let last = horizontal.last().unwrap();
+    assert_eq!(last.health.mode, Mode::Nominal);
+    assert!(
+        last.health.gnss_vel.fused > 20,
+        "{:?}",
+        last.health.gnss_vel
+    );
+    let (a, b) = (tilt_rms_deg(&full), tilt_rms_deg(&horizontal));
+    eprintln!("paper tilt RMS: 3-D velocity {a:.3} deg, horizontal only {b:.3} deg");
+    assert!(b <= 2.0 * a + 0.2, "{a} {b}");
+}

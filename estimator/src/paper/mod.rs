@@ -126,7 +126,7 @@ pub struct PaperFilter {
     health: Health,
     /// Diagnostics of the GNSS-derived attitude aiding of the alignment.
     gnss_att_diag: crate::aid_sources::InnovDiag,
-    /// Fixes left out because they carried no full velocity (this profile needs it).
+    /// Fixes left out because they carried no velocity (this profile needs one).
     fixes_without_velocity: u64,
     /// The alignment is over (every attitude σ fell below `paper_video_start_sigma_rad`).
     aligned: bool,
@@ -385,7 +385,7 @@ impl PaperFilter {
     /// GNSS fix: GPS-IMU update (eqs. 32–33), attitude aiding without video, initialisation.
     pub fn push_gnss(&mut self, fix: &GnssFix) {
         let lla = Lla::from_deg(fix.lat_deg, fix.lon_deg, fix.alt_m);
-        if fix.velocity.and_then(|v| v.ned_mps()).is_some() {
+        if fix.velocity.is_some() {
             self.leave_gnssless();
         }
         if self.frame.is_none() {
@@ -394,8 +394,10 @@ impl PaperFilter {
         let Some(frame) = self.frame else { return };
         let meas = GnssMeas::from_fix(fix, frame.lla_to_ned(&lla));
         // The paper's GPS-IMU filter (eqs. 32–33) fuses position and velocity together and aligns
-        // from the velocity: a fix without a full velocity is counted and left out of this profile.
-        let Some(meas_vel) = meas.vel_ned_mps else {
+        // from the velocity: a fix without one is counted and left out of this profile. Without
+        // its vertical component (ground speed and course) the vertical is taken as 0 here, for
+        // the alignment and the GNSS acceleration, and left unmeasured in eq. (33).
+        let Some(meas_vel) = fix_velocity(&meas) else {
             self.fixes_without_velocity += 1;
             return;
         };
@@ -426,7 +428,7 @@ impl PaperFilter {
         };
         let a_n = match self.last_fix {
             Some((p, _)) if meas.t_ns > p.t_ns && meas.t_ns - p.t_ns < 2_000_000_000 => {
-                (meas_vel - p.vel_ned_mps.unwrap_or(meas_vel))
+                (meas_vel - fix_velocity(&p).unwrap_or(meas_vel))
                     / ((meas.t_ns - p.t_ns) as f64 * 1e-9)
             }
             _ => Vector3::zeros(),
@@ -602,14 +604,26 @@ impl PaperFilter {
         let c = att.rotation();
         let pos = meas.pos_ned_m - c * self.lever_b;
         let vel = meas_vel - c * gyro.cross(&self.lever_b);
-        self.gps_imu = Some(PosVelEkf::new(
+        let mut gi = PosVelEkf::new(
             pos,
             vel,
             Vector3::new(meas.sigma_h_m, meas.sigma_h_m, meas.sigma_v_m),
             meas.sigma_vel_mps * 2.0,
-        ));
+        );
+        if meas.vel_ned_mps.is_none() {
+            let var = crate::init::UNKNOWN_VERTICAL_VELOCITY_SIGMA_MPS.powi(2);
+            gi.p[(5, 5)] = gi.p[(5, 5)].max(var);
+        }
+        self.gps_imu = Some(gi);
         self.att = Some(att);
     }
+}
+
+/// The fix's velocity as this profile takes it: the receiver's 3-D one, or its horizontal one
+/// with the vertical taken as 0 (ground speed and course only); `None` without a velocity.
+fn fix_velocity(meas: &GnssMeas) -> Option<Vector3<f64>> {
+    meas.vel_ned_mps
+        .or_else(|| meas.vel_h_mps.map(|h| Vector3::new(h.x, h.y, 0.0)))
 }
 
 /// GNSS-derived attitude pseudo-measurement for the no-video case (see the module doc).

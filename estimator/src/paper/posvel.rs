@@ -13,6 +13,10 @@ use super::attitude::{AttitudeEkf, lever_jacobian};
 use crate::aid_sources::gnss_pos::GnssMeas;
 use crate::aid_sources::{InnovDiag, chi2_gate};
 
+/// Variance of a velocity component the receiver does not give, (m/s)² (σ 1 km/s): fused with a
+/// zero innovation, it changes nothing.
+const UNMEASURED_VAR: f64 = 1e6;
+
 /// Position/velocity EKF (6 states).
 #[derive(Debug, Clone, PartialEq)]
 pub struct PosVelEkf {
@@ -70,6 +74,7 @@ impl PosVelEkf {
         gate: f64,
         t_ns: i64,
         force: bool,
+        dof: usize,
         diag: &mut InnovDiag,
     ) -> Option<Matrix3<f64>> {
         let y = *y;
@@ -78,7 +83,7 @@ impl PosVelEkf {
         let nis = (y.transpose() * s_inv * y)[(0, 0)];
         diag.innov = [y.x, y.y, y.z];
         diag.innov_var = [s[(0, 0)], s[(1, 1)], s[(2, 2)]];
-        diag.test_ratio = nis / chi2_gate(3, gate);
+        diag.test_ratio = nis / chi2_gate(dof, gate);
         if !force && diag.test_ratio > 1.0 {
             if diag.consecutive_rejects == 0 {
                 diag.first_reject_t_ns = t_ns;
@@ -132,17 +137,27 @@ impl PosVelEkf {
                 self.p[(k, k)] += y[k] * y[k];
             }
         }
-        self.update_block(0, &y, &rp, gate, m.t_ns, stuck, diag_pos);
+        self.update_block(0, &y, &rp, gate, m.t_ns, stuck, 3, diag_pos);
         // Eq. (33): v_GPS = v_cg + C (ω × r), fused into both filters. The GNSS velocity error is
         // white, and in turns `ω × r` is metres per second for a 10 m lever arm (a tenth of that
         // for 2 m), which is what makes the attitude observable (section VI).
         let c = att.rotation();
         let u = w_nb.cross(lever_b);
         let h_e = lever_jacobian(&att.euler, &u);
-        // The caller fuses only fixes with a full velocity (paper profile, `push_gnss`).
-        let Some(v_meas) = m.vel_ned_mps else { return };
+        // A receiver that gives ground speed and course only (MAVLink's `GPS_RAW_INT`, NMEA's
+        // RMC) measures the horizontal velocity: its vertical row is taken as unmeasured (a zero
+        // innovation of variance `UNMEASURED_VAR`, which leaves the filter as it was) and the
+        // gate counts two degrees of freedom.
+        let (v_meas, vertical) = match (m.vel_ned_mps, m.vel_h_mps) {
+            (Some(v), _) => (v, true),
+            (None, Some(h)) => (Vector3::new(h.x, h.y, self.v.z + (c * u).z), false),
+            (None, None) => return,
+        };
         let y = v_meas - (self.v + c * u);
-        let rv = Matrix3::identity() * m.sigma_vel_mps.powi(2);
+        let mut rv = Matrix3::identity() * m.sigma_vel_mps.powi(2);
+        if !vertical {
+            rv[(2, 2)] = UNMEASURED_VAR;
+        }
         let stuck = diag_vel.consecutive_rejects > 0
             && m.t_ns - diag_vel.first_reject_t_ns >= reset_timeout_ns;
         if stuck {
@@ -151,7 +166,8 @@ impl PosVelEkf {
             }
         }
         let r = rv + h_e * att.p_euler() * h_e.transpose();
-        if let Some(s_inv) = self.update_block(3, &y, &r, gate, m.t_ns, stuck, diag_vel) {
+        let dof = if vertical { 3 } else { 2 };
+        if let Some(s_inv) = self.update_block(3, &y, &r, gate, m.t_ns, stuck, dof, diag_vel) {
             att.apply_joint(&h_e, &s_inv, &y, m.t_ns);
         }
     }
@@ -190,6 +206,6 @@ impl PosVelEkf {
     ) {
         let r = Matrix3::identity() * sigma_mps.powi(2);
         let y = v_meas - self.v;
-        self.update_block(3, &y, &r, gate, t_ns, false, diag);
+        self.update_block(3, &y, &r, gate, t_ns, false, 3, diag);
     }
 }
