@@ -187,9 +187,16 @@ async fn clipped_imu_samples_reach_health_and_metrics() {
 }
 
 /// A vehicle configured without a receiver: the real engine starts it from the IMU alone and
-/// its poses carry the attitude only (`eskf::gnssless`).
+/// its poses carry the attitude only (`eskf::gnssless`, and `paper::gnssless` for a vehicle of
+/// the `paper` profile).
 #[tokio::test]
 async fn a_vehicle_without_gnss_gets_its_attitude_and_no_position() {
+    for profile in [pb::FilterProfile::Eskf, pb::FilterProfile::Paper] {
+        without_gnss(profile).await;
+    }
+}
+
+async fn without_gnss(profile: pb::FilterProfile) {
     // The real engine (the kit's echo engine makes no attitude).
     let server = Server::start(test_config()).await.unwrap();
     let mut c = common::client(&server).await;
@@ -203,6 +210,7 @@ async fn a_vehicle_without_gnss_gets_its_attitude_and_no_position() {
         .into_inner();
     let mut config = uavnav_tests::wire::vehicle_config(false);
     config.gnss = None;
+    config.profile = profile as i32;
     let mut envs = vec![pb::SensorEnvelope {
         vehicle_id: "indoor".into(),
         sequence: 0,
@@ -227,7 +235,11 @@ async fn a_vehicle_without_gnss_gets_its_attitude_and_no_position() {
         .unwrap()
         .unwrap()
         .unwrap();
-    assert_eq!(p.mode, pb::EstimatorMode::AttitudeOnly as i32, "{p:?}");
+    assert_eq!(
+        p.mode,
+        pb::EstimatorMode::AttitudeOnly as i32,
+        "{profile:?} {p:?}"
+    );
     assert!(p.position.is_none() && p.vel_ned_mps.is_none() && p.sigma_pos_ned_m.is_none());
     // Level: roll and pitch near zero, with a stated σ.
     assert!(p.roll_rad.abs() < 0.01 && p.pitch_rad.abs() < 0.01, "{p:?}");
