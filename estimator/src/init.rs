@@ -211,6 +211,24 @@ pub fn rotation_disproved<'a>(
     would_rad >= 3.0 * noise_rad && f_a.angle(&f_b_last) < 0.5 * would_rad
 }
 
+/// Whether a filter whose first IMU sample came at `first_t_ns` starts without GNSS at `t_ns`:
+/// after `start_without_gnss_after_s`, at once for a vehicle configured without a receiver.
+/// Written so that a NaN wait never starts (and an infinite one never does either).
+pub fn start_without_gnss_due(
+    first_t_ns: i64,
+    t_ns: i64,
+    has_gnss: bool,
+    params: &EstimatorParams,
+) -> bool {
+    let wait_s = if has_gnss {
+        params.start_without_gnss_after_s
+    } else {
+        0.0
+    };
+    let waited_s = (t_ns - first_t_ns) as f64 * 1e-9;
+    waited_s.partial_cmp(&wait_s).is_some_and(|o| o.is_ge())
+}
+
 /// The gyro's bias from a levelling window of `(t_ns, gyro, accel)` samples taken at rest (a
 /// start without GNSS): the mean gyro, when it is small ([`START_BIAS_MAX_RADPS`]) or the
 /// accelerometer disproves the rotation ([`rotation_disproved`]), with the mean's own noise per

@@ -67,6 +67,38 @@ fn attitude_scores(f: &Flight, poses: &[PoseOutput], after_ns: i64) -> ([f64; 3]
     )
 }
 
+/// Checks a run without GNSS (first pose within `first_within_ns` of the first IMU sample,
+/// attitude only throughout, every attitude σ finite and positive) and prints and returns its
+/// roll/pitch/yaw RMSE in degrees after 30 s and the fraction within 3σ.
+fn attitude_only_scores(
+    label: &str,
+    f: &Flight,
+    poses: &[PoseOutput],
+    first_within_ns: i64,
+) -> ([f64; 3], f64) {
+    let t0 = f.imu()[0].t_ns;
+    assert!(
+        poses.first().unwrap().t_ns - t0 < first_within_ns,
+        "{label}: first pose late"
+    );
+    assert!(poses.iter().all(|p| p.health.mode == Mode::AttitudeOnly));
+    assert!(
+        poses
+            .iter()
+            .all(|p| p.sigma_att_rad.iter().all(|s| s.is_finite() && *s > 0.0))
+    );
+    let (rmse, within) = attitude_scores(f, poses, t0 + 30 * S);
+    let deg = rmse.map(f64::to_degrees);
+    eprintln!(
+        "{label}: roll/pitch/yaw RMSE {:.2}/{:.2}/{:.2} deg, {:.1} % within 3 sigma",
+        deg[0],
+        deg[1],
+        deg[2],
+        100.0 * within
+    );
+    (deg, within)
+}
+
 #[test]
 fn without_gnss_the_attitude_is_held_by_gravity_and_the_compass() {
     let f = flight();
@@ -77,24 +109,8 @@ fn without_gnss_the_attitude_is_held_by_gravity_and_the_compass() {
     // Where the vehicle is is not known either: the compass is fused against its own field.
     let mut est = Estimator::new(&config, EstimatorParams::default(), None);
     let poses = fly(&mut est, &f, None);
-    let t0 = f.imu()[0].t_ns;
     // A vehicle without a receiver starts once level (the 0.5 s window, behind the horizon).
-    assert!(poses.first().unwrap().t_ns - t0 < S, "first pose late");
-    assert!(poses.iter().all(|p| p.health.mode == Mode::AttitudeOnly));
-    assert!(
-        poses
-            .iter()
-            .all(|p| p.sigma_att_rad.iter().all(|s| s.is_finite() && *s > 0.0))
-    );
-    let (rmse, within) = attitude_scores(&f, &poses, t0 + 30 * S);
-    let deg = rmse.map(f64::to_degrees);
-    eprintln!(
-        "multirotor without GNSS: roll/pitch/yaw RMSE {:.2}/{:.2}/{:.2} deg, {:.1} % within 3 sigma",
-        deg[0],
-        deg[1],
-        deg[2],
-        100.0 * within
-    );
+    let (deg, within) = attitude_only_scores("multirotor without GNSS", &f, &poses, S);
     assert!(deg[0] < 2.0 && deg[1] < 2.0, "{deg:?}");
     assert!(deg[2] < 10.0, "{deg:?}");
     assert!(within >= 0.95, "{within}");
@@ -159,24 +175,8 @@ fn the_paper_profile_without_gnss_holds_roll_and_pitch_and_says_the_heading_is_u
     };
     let mut est = Estimator::new(&config, EstimatorParams::default(), None);
     let poses = fly(&mut est, &f, None);
-    let t0 = f.imu()[0].t_ns;
-    // Started once level (the paper's levelling window at 200 Hz), attitude only throughout.
-    assert!(poses.first().unwrap().t_ns - t0 < 2 * S, "first pose late");
-    assert!(poses.iter().all(|p| p.health.mode == Mode::AttitudeOnly));
-    assert!(
-        poses
-            .iter()
-            .all(|p| p.sigma_att_rad.iter().all(|s| s.is_finite() && *s > 0.0))
-    );
-    let (rmse, within) = attitude_scores(&f, &poses, t0 + 30 * S);
-    let deg = rmse.map(f64::to_degrees);
-    eprintln!(
-        "paper, multirotor without GNSS: roll/pitch/yaw RMSE {:.2}/{:.2}/{:.2} deg, {:.1} % within 3 sigma",
-        deg[0],
-        deg[1],
-        deg[2],
-        100.0 * within
-    );
+    // Started once level (the paper's levelling window at 200 Hz).
+    let (deg, within) = attitude_only_scores("paper, multirotor without GNSS", &f, &poses, 2 * S);
     assert!(deg[0] < 3.0 && deg[1] < 3.0, "{deg:?}");
     assert!(within >= 0.95, "{within}");
     // No compass in this profile: the heading stays unknown, and its σ says so.

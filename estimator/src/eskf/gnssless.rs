@@ -40,14 +40,8 @@ impl Eskf {
             return;
         }
         let first = *self.first_imu_t_ns.get_or_insert(t_ns);
-        let wait_s = if self.config.gnss.is_some() {
-            self.params.start_without_gnss_after_s
-        } else {
-            0.0
-        };
-        // Written so that a NaN wait never starts (and an infinite one never does either).
-        let waited_s = (t_ns - first) as f64 * 1e-9;
-        if waited_s.partial_cmp(&wait_s).is_none_or(|o| o.is_lt()) {
+        let has_gnss = self.config.gnss.is_some();
+        if !crate::init::start_without_gnss_due(first, t_ns, has_gnss, &self.params) {
             return;
         }
         if self.frame.is_none() {

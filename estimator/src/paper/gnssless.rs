@@ -19,7 +19,9 @@
 //!   that fix as if they had waited for it (the IMU history and the levelling window are kept).
 
 use super::*;
-use crate::init::{UNALIGNED_YAW_SIGMA_RAD, gyro_bias_at_rest, mean_and_spread};
+use crate::init::{
+    UNALIGNED_YAW_SIGMA_RAD, gyro_bias_at_rest, mean_and_spread, start_without_gnss_due,
+};
 
 /// Held-velocity windows rejected in a row that restart the filter without GNSS (15 s with
 /// 5 s windows): the tilt is then far from what the accelerometers have shown for that long,
@@ -38,14 +40,7 @@ impl PaperFilter {
             return;
         }
         let first = *self.first_imu_t_ns.get_or_insert(t_ns);
-        let wait_s = if self.has_gnss {
-            self.params.start_without_gnss_after_s
-        } else {
-            0.0
-        };
-        // Written so that a NaN wait never starts.
-        let waited_s = (t_ns - first) as f64 * 1e-9;
-        if waited_s.partial_cmp(&wait_s).is_none_or(|o| o.is_lt()) {
+        if !start_without_gnss_due(first, t_ns, self.has_gnss, &self.params) {
             return;
         }
         if !self.levelling_window_full() {
@@ -98,26 +93,8 @@ impl PaperFilter {
         s: &ImuSample,
         frame: &LocalFrame,
     ) -> Option<PoseOutput> {
+        let (m, _, accel_psd, dt_s) = self.predict_attitude(prev, s)?;
         let att = self.att.as_mut()?;
-        let m = mean_of(prev, s);
-        let dt_s = (s.t_ns - prev.t_ns) as f64 * 1e-9;
-        let (gyro_psd, accel_psd) = observe_imu_noise(
-            &mut self.observed_psd,
-            prev,
-            s,
-            dt_s,
-            self.gyro_psd,
-            self.accel_psd,
-        );
-        let gyro = m.gyro - self.gnss_tilt.gyro_bias_radps();
-        att.predict(
-            &gyro,
-            &self.w_ie,
-            dt_s,
-            gyro_psd + self.params.paper_gyro_instability_psd,
-            self.gyro_bias_sigma_radps,
-            s.t_ns,
-        );
         // Without GNSS nothing else bounds the Euler angles' covariance when the vehicle
         // tumbles (see `cap_euler_variance`). Not applied with GNSS, whose runs it would not
         // change but by rounding.

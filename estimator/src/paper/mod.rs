@@ -61,7 +61,7 @@ use crate::init::attitude_from_gravity;
 use crate::output::{AidingFlags, PoseOutput};
 use crate::output_predictor::mean_of;
 use crate::params::EstimatorParams;
-use crate::prediction::{GravityCache, earth_rate_ned};
+use crate::prediction::{GravityCache, ImuMean, earth_rate_ned};
 use attitude::{AttitudeEkf, DirectionMeas};
 use posvel::PosVelEkf;
 
@@ -316,28 +316,12 @@ impl PaperFilter {
         if self.gnssless {
             return self.step_gnssless(&prev, s, &frame);
         }
+        // Both filters run from the first fix (before it, only without GNSS, above).
+        self.gps_imu.as_ref()?;
+        let (m, gyro, accel_psd, dt_s) = self.predict_attitude(&prev, s)?;
         let (Some(att), Some(gi)) = (self.att.as_mut(), self.gps_imu.as_mut()) else {
             return None;
         };
-        let m = mean_of(&prev, s);
-        let dt_s = (s.t_ns - prev.t_ns) as f64 * 1e-9;
-        let (gyro_psd, accel_psd) = observe_imu_noise(
-            &mut self.observed_psd,
-            &prev,
-            s,
-            dt_s,
-            self.gyro_psd,
-            self.accel_psd,
-        );
-        let gyro = m.gyro - self.gnss_tilt.gyro_bias_radps();
-        att.predict(
-            &gyro,
-            &self.w_ie,
-            dt_s,
-            gyro_psd + self.params.paper_gyro_instability_psd,
-            self.gyro_bias_sigma_radps,
-            s.t_ns,
-        );
         self.heading.add_imu(&gyro, &m.accel, dt_s);
         let c = att.rotation();
         let att_var = att.p_euler().trace() / 3.0;
@@ -380,6 +364,37 @@ impl PaperFilter {
             self.vio2 = None;
         }
         self.output(s.t_ns)
+    }
+
+    /// VIDEO-IMU(1)'s prediction over one IMU interval (eq. 31), with the process noise the data
+    /// shows and the learnt gyro bias taken off. Returns the interval's mean sample, the gyro
+    /// used, the accelerometer PSD and the interval, s; `None` before the filter starts.
+    fn predict_attitude(
+        &mut self,
+        prev: &ImuSample,
+        s: &ImuSample,
+    ) -> Option<(ImuMean, Vector3<f64>, f64, f64)> {
+        let att = self.att.as_mut()?;
+        let m = mean_of(prev, s);
+        let dt_s = (s.t_ns - prev.t_ns) as f64 * 1e-9;
+        let (gyro_psd, accel_psd) = observe_imu_noise(
+            &mut self.observed_psd,
+            prev,
+            s,
+            dt_s,
+            self.gyro_psd,
+            self.accel_psd,
+        );
+        let gyro = m.gyro - self.gnss_tilt.gyro_bias_radps();
+        att.predict(
+            &gyro,
+            &self.w_ie,
+            dt_s,
+            gyro_psd + self.params.paper_gyro_instability_psd,
+            self.gyro_bias_sigma_radps,
+            s.t_ns,
+        );
+        Some((m, gyro, accel_psd, dt_s))
     }
 
     /// GNSS fix: GPS-IMU update (eqs. 32–33), attitude aiding without video, initialisation.
