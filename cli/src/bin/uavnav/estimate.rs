@@ -25,9 +25,9 @@ pub struct Args {
     /// Do not use the camera.
     #[arg(long)]
     pub no_vision: bool,
-    /// Do not use GNSS. `eskf` then starts once level and reports attitude only (mode
-    /// `attitude_only`: the position, velocity and position-σ columns are empty); `paper` starts
-    /// from a GNSS fix and writes no pose.
+    /// Do not use GNSS. Both profiles then start once level and report attitude only (mode
+    /// `attitude_only`: the position, velocity and position-σ columns are empty); `paper` has no
+    /// heading then (it reads no compass).
     #[arg(long)]
     pub no_gnss: bool,
     /// Do not use the magnetometer (the heading then comes from the yaw-hypothesis bank).
