@@ -66,7 +66,8 @@ pub enum Mode {
     /// Non-finite state or covariance beyond the divergence bounds.
     Diverged,
     /// Started without a GNSS fix and nothing has given a position since: roll and pitch are
-    /// held by gravity, the heading by the magnetometer when there is one; position and
+    /// held by gravity, the heading by the magnetometer when there is one (`eskf`; the `paper`
+    /// profile reads none, and its heading stays unknown); position and
     /// velocity are not estimated (absent on the wire and empty in `poses.csv`; the fields of
     /// [`PoseOutput`] then hold the filter's internal hold point and mean nothing).
     AttitudeOnly,

@@ -211,6 +211,21 @@ pub fn rotation_disproved<'a>(
     would_rad >= 3.0 * noise_rad && f_a.angle(&f_b_last) < 0.5 * would_rad
 }
 
+/// Makes `frame` the provisional frame of a filter that does not know where it is, when it has
+/// none: origin at 45° N, 0° E, 0 m (only its normal gravity is used), the Earth rate `w_ie` left
+/// out, `provisional` set. Returns the frame in use.
+pub fn ensure_frame<'a>(
+    frame: &'a mut Option<uavnav_core::LocalFrame>,
+    provisional: &mut bool,
+    w_ie: &mut Vector3<f64>,
+) -> &'a uavnav_core::LocalFrame {
+    frame.get_or_insert_with(|| {
+        *provisional = true;
+        *w_ie = Vector3::zeros();
+        uavnav_core::LocalFrame::new(uavnav_core::Lla::from_deg(45.0, 0.0, 0.0))
+    })
+}
+
 /// Whether a filter whose first IMU sample came at `first_t_ns` starts without GNSS at `t_ns`:
 /// after `start_without_gnss_after_s`, at once for a vehicle configured without a receiver.
 /// Written so that a NaN wait never starts (and an infinite one never does either).

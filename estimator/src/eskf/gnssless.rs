@@ -4,7 +4,7 @@
 //!
 //! * **Start**: levelled on gravity, heading unknown (the magnetometer aligns it as usual), zero
 //!   velocity, at the configured origin or, without one, at the origin of a provisional frame
-//!   ([`provisional_frame`]: the place is unknown, so the Earth rate is left out and gravity is
+//!   ([`crate::init::ensure_frame`]: the place is unknown, so the Earth rate is left out and gravity is
 //!   the normal gravity at 45°; its ±0.03 m/s² from the true place goes into the accelerometer
 //!   bias).
 //! * **While running**: the position hold ([`crate::aid_sources::position_hold`]) keeps the
@@ -18,19 +18,13 @@
 //!   runs from its first fix as it always did.
 
 use nalgebra::Vector3;
+use uavnav_core::Lla;
 use uavnav_core::magnetic::MagneticField;
-use uavnav_core::{Lla, LocalFrame};
 
 use super::Eskf;
 use crate::aid_sources::baro_height::BaroState;
 use crate::aid_sources::mag_heading::DEAD_FIELD_T;
 use crate::health::Mode;
-
-/// The frame of a filter that does not know where it is: its origin at 45° N, 0° E, 0 m (only
-/// its normal gravity is used, and the Earth rate is left out).
-fn provisional_frame() -> LocalFrame {
-    LocalFrame::new(Lla::from_deg(45.0, 0.0, 0.0))
-}
 
 impl Eskf {
     /// At the horizon `t_ns` with no filter yet: starts without GNSS when it is time (see the
@@ -44,14 +38,8 @@ impl Eskf {
         if !crate::init::start_without_gnss_due(first, t_ns, has_gnss, &self.params) {
             return;
         }
-        if self.frame.is_none() {
-            self.frame = Some(provisional_frame());
-            self.frame_provisional = true;
-            self.w_ie = Vector3::zeros();
-        }
-        let Some(frame) = self.frame.as_ref() else {
-            return;
-        };
+        let frame =
+            crate::init::ensure_frame(&mut self.frame, &mut self.frame_provisional, &mut self.w_ie);
         let at = Vector3::zeros();
         let g = frame.gravity_ned(&at);
         let Some(r) =

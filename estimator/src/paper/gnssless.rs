@@ -28,11 +28,6 @@ use crate::init::{
 /// the way a vehicle at rest after landing shows it.
 pub const HOLD_DIVERGED_WINDOWS: u32 = 3;
 
-/// The frame of a filter that does not know where it is (as `eskf::gnssless`).
-fn provisional_frame() -> LocalFrame {
-    LocalFrame::new(Lla::from_deg(45.0, 0.0, 0.0))
-}
-
 impl PaperFilter {
     /// Before the filters have started: starts without GNSS when it is time (module doc).
     pub(super) fn try_start_without_gnss(&mut self, t_ns: i64) {
@@ -46,14 +41,8 @@ impl PaperFilter {
         if !self.levelling_window_full() {
             return;
         }
-        if self.frame.is_none() {
-            self.frame = Some(provisional_frame());
-            self.frame_provisional = true;
-            self.w_ie = Vector3::zeros();
-        }
-        let Some(frame) = self.frame.as_ref() else {
-            return;
-        };
+        let frame =
+            crate::init::ensure_frame(&mut self.frame, &mut self.frame_provisional, &mut self.w_ie);
         // The levelling window: the latest samples, as many as `init_f` holds.
         let n = self.init_f.len().min(self.imu.len());
         let window: Vec<(i64, Vector3<f64>, Vector3<f64>)> = self
