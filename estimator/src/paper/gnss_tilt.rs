@@ -218,22 +218,8 @@ impl GnssTilt {
     /// module doc for the lifecycle). `video` says whether a pseudo-attitude chain runs.
     pub fn at_fix(&mut self, fix: &TiltFix, att: &mut AttitudeEkf, video: bool, gate: f64) {
         let sigma_v = self.vel_noise_sigma(fix.t_ns, fix.vel_ned_mps.xy(), fix.sigma_vel_mps);
-        let fresh = TiltWindow::start(fix.t_ns, fix.vel_ned_mps);
-        let Some(w) = self.window.take() else {
-            self.window = Some(fresh);
-            return;
-        };
-        let span_ns = fix.t_ns - w.t0_ns;
-        if video || !(0..=MAX_WINDOW_NS).contains(&span_ns) || w.imu_s <= 0.0 {
-            self.window = Some(fresh);
-            return;
-        }
-        if span_ns < WINDOW_NS {
-            self.window = Some(w);
-            return;
-        }
-        self.close(&w, fix, sigma_v, att, gate);
-        self.window = Some(fresh);
+        let spans = (WINDOW_NS, MAX_WINDOW_NS);
+        self.advance(fix, sigma_v, spans, att, video, gate);
     }
 
     /// Without GNSS (`paper::gnssless`): the same windows, [`HOLD_WINDOW_NS`] long and closed at
@@ -243,21 +229,37 @@ impl GnssTilt {
     /// correlated (their sum telescopes to `(v_end − v_start) / T_total`): taking them as
     /// independent overstates the noise, never understates it. `video` as for [`Self::at_fix`].
     pub fn at_hold(&mut self, fix: &TiltFix, att: &mut AttitudeEkf, video: bool, gate: f64) {
+        let spans = (HOLD_WINDOW_NS, 3 * HOLD_WINDOW_NS);
+        self.advance(fix, fix.sigma_vel_mps, spans, att, video, gate);
+    }
+
+    /// The window's lifecycle at `fix`: started if none runs, dropped (restarted here) while
+    /// video runs or when its span leaves `0..=spans.1`, kept while shorter than `spans.0`, else
+    /// fused with the velocity σ `sigma_v` and restarted here.
+    fn advance(
+        &mut self,
+        fix: &TiltFix,
+        sigma_v: f64,
+        spans: (i64, i64),
+        att: &mut AttitudeEkf,
+        video: bool,
+        gate: f64,
+    ) {
         let fresh = TiltWindow::start(fix.t_ns, fix.vel_ned_mps);
         let Some(w) = self.window.take() else {
             self.window = Some(fresh);
             return;
         };
         let span_ns = fix.t_ns - w.t0_ns;
-        if video || !(0..=3 * HOLD_WINDOW_NS).contains(&span_ns) || w.imu_s <= 0.0 {
+        if video || !(0..=spans.1).contains(&span_ns) || w.imu_s <= 0.0 {
             self.window = Some(fresh);
             return;
         }
-        if span_ns < HOLD_WINDOW_NS {
+        if span_ns < spans.0 {
             self.window = Some(w);
             return;
         }
-        self.close(&w, fix, fix.sigma_vel_mps, att, gate);
+        self.close(&w, fix, sigma_v, att, gate);
         self.window = Some(fresh);
     }
 

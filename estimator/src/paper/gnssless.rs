@@ -2,7 +2,7 @@
 //! without GNSS, attitude only ([`Mode::AttitudeOnly`]), as the `eskf` profile does
 //! (`eskf::gnssless`).
 //!
-//! * **Start**: when no fix this profile can use (one with a full velocity) has come for
+//! * **Start**: when no fix this profile can use (one with a velocity) has come for
 //!   `start_without_gnss_after_s` since the first IMU sample (at once for a vehicle configured
 //!   without a receiver), from the levelling window: roll and pitch from the mean specific
 //!   force, the heading unknown (this profile reads no magnetometer). Without a configured
