@@ -12,7 +12,7 @@ impl PaperFilter {
         let gate = self.params.gate_sigma;
         // A chain starts only once aligned; a restart later is allowed whatever σ has grown to
         // (the chain's error state starts from the filter's covariance, so it stays honest).
-        let start_sigma = if self.aligned {
+        let start_sigma = if self.aligned || self.settled {
             f64::INFINITY
         } else {
             self.params.paper_video_start_sigma_rad
@@ -27,7 +27,7 @@ impl PaperFilter {
         );
         let now_ns = self.imu.back().map_or(m.t1_ns, |s| s.t_ns);
         if self.params.paper_video_direction
-            && self.aligned
+            && (self.aligned || self.settled)
             && self.vio2.is_none()
             && self.health.gnss_vel.active(now_ns, D1_GNSS_VEL_RECENT_NS)
             && let Some(d1) = self.direction_meas(m, &bfc)
