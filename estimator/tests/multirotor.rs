@@ -30,6 +30,15 @@ fn flight(heading_deg: f64, with_mag: bool) -> Flight {
     Flight::new(&s).unwrap()
 }
 
+/// `scenarios/multirotor.toml` as committed.
+fn multirotor_scenario() -> Scenario {
+    let path = format!(
+        "{}/../scenarios/multirotor.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    Scenario::from_toml_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
 /// Runs the ESKF over every sensor of the flight; returns the poses and the heading source at the end.
 fn run(f: &Flight) -> (Vec<PoseOutput>, HeadingSource) {
     run_with(f, &f.vehicle_config())
@@ -183,11 +192,7 @@ fn tilt_scores(f: &Flight, poses: &[PoseOutput]) -> ([f64; 2], [f64; 2]) {
 /// now 99.2 %, 0.44°).
 #[test]
 fn large_turn_on_biases_without_a_compass_leave_the_tilt_sigma_honest() {
-    let path = format!(
-        "{}/../scenarios/multirotor.toml",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    let mut s = Scenario::from_toml_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let mut s = multirotor_scenario();
     s.mag = None;
     s.imu.gyro_bias_sigma_radps = 0.02;
     s.imu.accel_bias_sigma_mps2 = 0.3;
@@ -311,11 +316,7 @@ fn paper_profile_takes_a_multirotor_heading_from_the_yaw_bank() {
 /// worst before the three-window test; 100 % and 0.075 m/s after).
 #[test]
 fn positions_that_wander_fast_leave_the_velocity_sigma_honest() {
-    let path = format!(
-        "{}/../scenarios/multirotor.toml",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    let mut s = Scenario::from_toml_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let mut s = multirotor_scenario();
     s.gnss.gm_tau_s = 20.0;
     let f = Flight::new(&s).unwrap();
     let (poses, _) = run(&f);
