@@ -59,9 +59,9 @@ const RECENT_WINDOWS: usize = 3;
 /// white positions pass 1.3 times their expectation over three windows in 27 % (vertical, 3
 /// degrees of freedom) and 25 % (horizontal, 6) of the draws, and less with receivers, whose
 /// stated σ includes the slow part of their error; the shared real plane's windows in flight run
-/// 2–5 times over. 1.3 rather than 2: the shared real flights' attitude is as good or better with either
-/// (plane_E roll / pitch 1.75 / 1.73° with 1.3, 1.86 / 1.79° with 2), while the copters' receivers
-/// show small persistent errors that a higher threshold leaves unmeasured.
+/// 2–5 times over. 1.3 rather than 2: with 2, plane_E's roll / pitch were 1.86 / 1.79° against
+/// 1.75 / 1.73° (1.74 / 1.82° with one window at a time): real receivers' velocities carry small
+/// persistent errors that a higher threshold leaves unmeasured.
 const SIGNIFICANT_RATIO: f64 = 1.3;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -233,7 +233,7 @@ mod tests {
         // A receiver at rest whose positions scatter as it says (σ 0.5 m per axis): the fix that
         // ends the first window and starts the second lands 1.1 m off, so both windows' D² run
         // 1.16 times their expectation. Two such draws are noise, not a velocity error (taken
-        // one window at a time they read as a persistent 0.02 m/s, then held for a minute).
+        // one window at a time they read as a persistent 0.06 m/s, then held for a minute).
         let p = ConsistencyParams::default();
         let mut c = VelConsistency::default();
         for k in 0..200 {
