@@ -13,11 +13,7 @@ use uavnav_estimator::{Estimator, EstimatorParams, PoseOutput};
 use uavnav_sim::{Flight, Scenario};
 
 fn flight(heading_deg: f64, with_mag: bool) -> Flight {
-    let path = format!(
-        "{}/../scenarios/multirotor.toml",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    let text = std::fs::read_to_string(path).unwrap();
+    let text = multirotor_toml();
     assert!(text.contains("heading_deg = 0.0"));
     let text = text.replace(
         "heading_deg = 0.0",
@@ -30,13 +26,18 @@ fn flight(heading_deg: f64, with_mag: bool) -> Flight {
     Flight::new(&s).unwrap()
 }
 
-/// `scenarios/multirotor.toml` as committed.
-fn multirotor_scenario() -> Scenario {
+/// The text of `scenarios/multirotor.toml`.
+fn multirotor_toml() -> String {
     let path = format!(
         "{}/../scenarios/multirotor.toml",
         env!("CARGO_MANIFEST_DIR")
     );
-    Scenario::from_toml_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+    std::fs::read_to_string(path).unwrap()
+}
+
+/// `scenarios/multirotor.toml` as committed.
+fn multirotor_scenario() -> Scenario {
+    Scenario::from_toml_str(&multirotor_toml()).unwrap()
 }
 
 /// Runs the ESKF over every sensor of the flight; returns the poses and the heading source at the end.

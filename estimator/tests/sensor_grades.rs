@@ -3,7 +3,8 @@
 //! bank), GNSS only, each with one sensor changed from the scenario's: a consumer IMU, a 50 Hz
 //! IMU, a 1 Hz receiver, a receiver 4× noisier, one whose position error wanders with a 20 s
 //! correlation time (the scenario's: 300 s), and a 1.4 m lever arm. Position, velocity and
-//! attitude each at least 95 % within 3σ after 30 s, as `uavnav estimate --report` scores. And
+//! attitude each at least 95 % within 3σ, scored as `uavnav estimate --report` scores
+//! (`AccuracyReport`, after its 30 s settling time). And
 //! the `paper` profile with a consumer IMU uses its camera.
 //! Release figures: `cargo run --release -p uavnav-runner --example paper_run -- FILE --no-vision`
 //! on the same edits.
@@ -11,9 +12,9 @@
 
 mod common;
 
-use common::{RunCfg, run, scenario};
+use common::{Oracle, RunCfg, outages_ns, run, scenario};
 use uavnav_core::FilterProfile;
-use uavnav_report::accuracy::consistency;
+use uavnav_report::accuracy::AccuracyReport;
 use uavnav_sim::{Flight, Scenario};
 
 /// One sensor changed from the scenario's.
@@ -76,10 +77,11 @@ fn check(name: &str, without_mag: bool) {
         apply(&mut s, v);
         let flight = Flight::new(&s).unwrap();
         let outs = run(&flight, &RunCfg::new(FilterProfile::Eskf, true, None));
-        let from = s.t0_ns + 30_000_000_000;
-        let c = consistency(&outs, flight.truth(), from);
+        let name_v = format!("{name} {v:?}");
+        let c =
+            AccuracyReport::compute(&name_v, &outs, flight.truth(), &outages_ns(&s)).consistency;
         eprintln!(
-            "{name} {v:?}: pos / vel / att within 3 sigma {:.1} / {:.1} / {:.1} % ({} samples)",
+            "{name_v}: pos / vel / att within 3 sigma {:.1} / {:.1} / {:.1} % ({} samples)",
             100.0 * c.pos_within_3sigma,
             100.0 * c.vel_within_3sigma,
             100.0 * c.att_within_3sigma,
@@ -120,14 +122,14 @@ fn the_paper_profile_uses_the_camera_of_a_consumer_imu() {
     let flight = Flight::new(&s).unwrap();
     let outs = run(
         &flight,
-        &RunCfg::new(FilterProfile::Paper, true, Some(common::Oracle::default())),
+        &RunCfg::new(FilterProfile::Paper, true, Some(Oracle::default())),
     );
     let last = outs.last().unwrap();
-    let r = uavnav_report::accuracy::AccuracyReport::compute(
+    let r = AccuracyReport::compute(
         "consumer IMU, paper, video",
         &outs,
         flight.truth(),
-        &common::outages_ns(&s),
+        &outages_ns(&s),
     );
     eprintln!(
         "{} (rotations fused {})",
