@@ -115,7 +115,7 @@ impl PaperFilter {
         self.divergence_resets += 1;
         self.gnssless = false;
         self.att = None;
-        self.gnss_tilt = gnss_tilt::GnssTilt::default();
+        self.gnss_tilt = self.gnss_tilt.restarted();
         self.observed_psd = (0.0, 0.0);
     }
 
@@ -127,7 +127,7 @@ impl PaperFilter {
         }
         self.gnssless = false;
         self.att = None;
-        self.gnss_tilt = gnss_tilt::GnssTilt::default();
+        self.gnss_tilt = self.gnss_tilt.restarted();
         self.health = Health::default();
         self.observed_psd = (0.0, 0.0);
         if self.frame_provisional {

@@ -101,7 +101,7 @@ impl PaperFilter {
             sigma_pos_ned_m: sigma_pos,
             sigma_vel_mps: sigma_vel,
             sigma_att_rad: sigma_att,
-            gyro_bias_radps: Vector3::zeros(),
+            gyro_bias_radps: self.gnss_tilt.gyro_bias_radps(),
             accel_bias_mps2: Vector3::zeros(),
             health: (&h).into(),
             aiding: AidingFlags {
@@ -153,7 +153,7 @@ impl PaperFilter {
             sigma_pos_ned_m: sd(&pos_cov),
             sigma_vel_mps: sd(&pv.p.fixed_view::<3, 3>(3, 3).into_owned()),
             sigma_att_rad: sigma_att,
-            gyro_bias_radps: Vector3::zeros(),
+            gyro_bias_radps: self.gnss_tilt.gyro_bias_radps(),
             accel_bias_mps2: Vector3::zeros(),
             health: (&h).into(),
             aiding: AidingFlags {
