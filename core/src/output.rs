@@ -41,7 +41,8 @@ pub struct PoseOutput {
     pub sigma_vel_mps: Vector3<f64>,
     /// 1-σ roll, pitch, yaw, rad.
     pub sigma_att_rad: Vector3<f64>,
-    /// Estimated gyro bias, rad/s (zero for the paper profile).
+    /// Estimated gyro bias, body, rad/s (the paper profile: the bias its GNSS tilt windows learnt,
+    /// `paper::gnss_tilt`, zero without them).
     pub gyro_bias_radps: Vector3<f64>,
     /// Estimated accelerometer bias, m/s² (zero for the paper profile).
     pub accel_bias_mps2: Vector3<f64>,
