@@ -304,13 +304,17 @@ fn trace() {
         );
         let Some(e) = est.eskf() else {
             eprintln!(
-                "t {:6.1} yaw {:7.1} ref {:7.1} sig rpy {:5.1} {:5.1} {:5.1} mode {:?} resets {}",
+                "t {:6.1} yaw {:7.1} ref {:7.1} sig rpy {:5.1} {:5.1} {:5.1} gyro bias {:6.3} {:6.3} \
+                 {:6.3} °/s mode {:?} resets {}",
                 (p.t_ns - t0) as f64 * 1e-9,
                 p.euler_rad.z.to_degrees(),
                 ry.to_degrees(),
                 p.sigma_att_rad.x.to_degrees(),
                 p.sigma_att_rad.y.to_degrees(),
                 p.sigma_att_rad.z.to_degrees(),
+                p.gyro_bias_radps.x.to_degrees(),
+                p.gyro_bias_radps.y.to_degrees(),
+                p.gyro_bias_radps.z.to_degrees(),
                 p.health.mode,
                 est.health().divergence_resets,
             );

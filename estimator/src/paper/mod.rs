@@ -17,8 +17,9 @@
 //! - Alignment (the "initial known value" of eq. 34): from the first fix, roll/pitch from the
 //!   accelerometers compensated by the GNSS acceleration and yaw from the GNSS course (no
 //!   sideslip, from the GNSS velocity with the lever-arm velocity removed), fused at every fix
-//!   (tilt σ 2°, course σ from the velocity σ over the speed) until every attitude σ is below
-//!   `paper_video_start_sigma_rad` (about 2 s), then never again.
+//!   (tilt σ that of the GNSS acceleration, at least 2°; course σ from the velocity σ over the
+//!   speed, and, with `paper_gnss_tilt`, from the roll and pitch σ it is solved at: eq. C1) until
+//!   every attitude σ is below `paper_video_start_sigma_rad` (about 2 s), then never again.
 //! - After that, GNSS reaches the attitude only through the lever arm of eqs. (32)–(33): the
 //!   GNSS update is linearized in the Euler angles too (`posvel::PosVelEkf::update_gnss`), so with a
 //!   big lever arm the attitude stays observable and with a small one it is nearly gyro
@@ -69,8 +70,9 @@ use posvel::PosVelEkf;
 const GYRO_MEAN_NS: i64 = 100_000_000;
 /// No GNSS for this long activates VIDEO-IMU(2), ns.
 const OUTAGE_AFTER_NS: i64 = 1_000_000_000;
-/// σ of the GNSS-derived tilt pseudo-measurement of the alignment, rad: the GNSS acceleration
-/// differenced from two fixes (0.05 m/s over 0.2 s, 0.35 m/s²) over g.
+/// Least σ of the GNSS-derived tilt pseudo-measurement of the alignment, rad: the GNSS
+/// acceleration differenced from two fixes (0.05 m/s over 0.2 s, 0.35 m/s²) over g; a noisier
+/// receiver's own figure when larger.
 const GNSS_TILT_SIGMA_RAD: f64 = 0.035;
 /// Floor of the course pseudo-measurement's σ, rad: the no-sideslip heading's sensitivity to the
 /// roll/pitch error in banked flight and the velocity's timing (0.1°). The course σ itself is the
@@ -509,7 +511,7 @@ impl PaperFilter {
                 let tilt_sigma = if self.params.paper_gnss_tilt {
                     None
                 } else {
-                    Some(GNSS_TILT_SIGMA_RAD)
+                    Some(GNSS_TILT_SIGMA_RAD.max((a_n_sigma / g.norm()).atan()))
                 };
                 gnss_attitude_aiding(
                     att,
