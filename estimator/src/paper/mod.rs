@@ -7,6 +7,7 @@
 //! | [`attitude`] | VIDEO-IMU(1): Euler angles from gyro rates (eq. 31) + video pseudo-attitude (eq. 34) |
 //! | [`posvel`] | GPS-IMU (eqs. 29, 30, 32, 33) and VIDEO-IMU(2) (eq. 35): position/velocity EKFs |
 //! | this file | the three filters' state, IMU stepping, GNSS fixes, alignment, divergence check |
+//! | `alignment` | the alignment from GNSS: tilt and course pseudo-measurements, when it has settled |
 //! | [`gnss_tilt`] | our addition: roll/pitch from the GNSS acceleration while no video chain runs |
 //! | [`heading`] | our addition: a multirotor's heading from the yaw-hypothesis bank |
 //! | `gnssless` | our addition: attitude only until the first usable fix |
@@ -43,6 +44,7 @@
 //! The un-modelled gyro bias is covered by extra process noise (with `paper_gnss_tilt`, a bias
 //! learnt from the windows' corrections is also taken off the gyro).
 
+mod alignment;
 pub mod attitude;
 pub mod gnss_tilt;
 mod gnssless;
@@ -63,6 +65,10 @@ use crate::output::{AidingFlags, PoseOutput};
 use crate::output_predictor::mean_of;
 use crate::params::EstimatorParams;
 use crate::prediction::{GravityCache, ImuMean, earth_rate_ned};
+pub use alignment::{
+    SETTLE_SPAN_NS, SETTLED_MAX_SIGMA_RAD, SETTLED_SHRINK, heading_without_sideslip,
+};
+use alignment::{alignment_settled, course_sigma_rad, gnss_attitude_aiding};
 use attitude::{AttitudeEkf, DirectionMeas};
 use posvel::PosVelEkf;
 
@@ -74,12 +80,6 @@ const OUTAGE_AFTER_NS: i64 = 1_000_000_000;
 /// acceleration differenced from two fixes (0.05 m/s over 0.2 s, 0.35 m/s²) over g; a noisier
 /// receiver's own figure when larger.
 const GNSS_TILT_SIGMA_RAD: f64 = 0.035;
-/// Floor of the course pseudo-measurement's σ, rad: the no-sideslip heading's sensitivity to the
-/// roll/pitch error in banked flight and the velocity's timing (0.1°). The course σ itself is the
-/// cross-track velocity σ over the speed (0.05 m/s at 30 m/s: 0.1°); the earlier fixed 0.05 rad
-/// was 30× that, so the alignment barely reached the 0.5° start σ of the video and left roll and
-/// pitch σ at the threshold.
-const GNSS_COURSE_FLOOR_RAD: f64 = 0.002;
 /// σ of the held speed of eq. (35) at the start of an outage, m/s, and its growth, m/s per s.
 const SPEED_SIGMA_MPS: f64 = 0.3;
 const SPEED_SIGMA_GROWTH_MPS_PER_S: f64 = 0.02;
@@ -676,96 +676,6 @@ fn fix_velocity(meas: &GnssMeas) -> Option<Vector3<f64>> {
         .or_else(|| meas.vel_h_mps.map(|h| Vector3::new(h.x, h.y, 0.0)))
 }
 
-/// GNSS-derived attitude pseudo-measurement for the no-video case (see the module doc).
-#[allow(clippy::too_many_arguments)]
-fn gnss_attitude_aiding(
-    att: &mut AttitudeEkf,
-    f_b: &Vector3<f64>,
-    g_app_n: &Vector3<f64>,
-    vel_n: &Vector3<f64>,
-    tilt_sigma: Option<f64>,
-    course_sigma: f64,
-    min_speed: f64,
-    gate: f64,
-    diag: &mut crate::aid_sources::InnovDiag,
-) {
-    let moving = vel_n.xy().norm() >= min_speed;
-    let yaw = if moving {
-        vel_n.y.atan2(vel_n.x)
-    } else {
-        att.euler.z
-    };
-    let Some(q) = attitude_from_gravity(f_b, g_app_n, yaw) else {
-        return;
-    };
-    let (r, p, y) = q.euler_angles();
-    let y = if moving {
-        // At the filter's roll and pitch when this fix's own are not fused: they carry the
-        // GNSS acceleration's noise (12° for a receiver 0.3 m/s noisy at 5 Hz, which put the
-        // heading 5° off at a σ of 0.6°).
-        match tilt_sigma {
-            Some(_) => heading_without_sideslip(r, p, vel_n),
-            None => heading_without_sideslip(att.euler.x, att.euler.y, vel_n),
-        }
-    } else {
-        y
-    };
-    // That heading moves with the roll and pitch it is solved at (by tan(roll) per unit of pitch
-    // in a bank): their uncertainty is the course's too (eq. C1), by central differences.
-    let course_sigma = if tilt_sigma.is_none() && moving {
-        let p_e = att.p_euler();
-        let d = 1e-4;
-        let (r0, p0) = (att.euler.x, att.euler.y);
-        let dy = |a: f64, b: f64| {
-            uavnav_core::rotation::wrap_pi(
-                heading_without_sideslip(a, b, vel_n) - heading_without_sideslip(r0, p0, vel_n),
-            )
-        };
-        let dr = (dy(r0 + d, p0) - dy(r0 - d, p0)) / (2.0 * d);
-        let dp = (dy(r0, p0 + d) - dy(r0, p0 - d)) / (2.0 * d);
-        let var = dr * dr * p_e[(0, 0)] + dp * dp * p_e[(1, 1)] + 2.0 * dr * dp * p_e[(0, 1)];
-        (course_sigma * course_sigma + var.max(0.0)).sqrt()
-    } else {
-        course_sigma
-    };
-    let course_sigma = moving.then_some(course_sigma);
-    att.update_euler(
-        &Vector3::new(r, p, y),
-        [tilt_sigma, tilt_sigma, course_sigma],
-        gate,
-        att.t_ns,
-        diag,
-    );
-}
-
-/// 1-σ of the course pseudo-measurement, rad: the velocity noise across the track over the
-/// horizontal speed, combined with `GNSS_COURSE_FLOOR_RAD`.
-fn course_sigma_rad(sigma_vel_mps: f64, v: &Vector3<f64>) -> f64 {
-    let vh = v.xy().norm().max(1e-3);
-    (sigma_vel_mps / vh).hypot(GNSS_COURSE_FLOOR_RAD)
-}
-
-/// The heading that puts the velocity in the body x–z plane (coordinated flight, no sideslip) at
-/// the given roll and pitch: solves `(Cᵀ v)_y = 0` by Newton's method from the course. With an
-/// angle of attack in a banked turn the heading differs from the course; this accounts for it.
-pub fn heading_without_sideslip(roll: f64, pitch: f64, vel_n: &Vector3<f64>) -> f64 {
-    let (sr, cr) = roll.sin_cos();
-    let (sp, cp) = pitch.sin_cos();
-    let mut yaw = vel_n.y.atan2(vel_n.x);
-    for _ in 0..4 {
-        let (sy, cy) = yaw.sin_cos();
-        let u1 = cy * vel_n.x + sy * vel_n.y;
-        let u2 = -sy * vel_n.x + cy * vel_n.y;
-        let f = cr * u2 + sr * (sp * u1 + cp * vel_n.z);
-        let df = -cr * u1 + sr * sp * u2;
-        if df.abs() < 1e-9 {
-            break;
-        }
-        yaw -= f / df;
-    }
-    uavnav_core::rotation::wrap_pi(yaw)
-}
-
 /// Least-squares line through `(t, ω)` samples (t ≤ 0, s) evaluated at t = 0; the mean when the
 /// samples span no time.
 fn rate_at_zero(samples: &[(f64, Vector3<f64>)], n: usize) -> Vector3<f64> {
@@ -782,42 +692,4 @@ fn rate_at_zero(samples: &[(f64, Vector3<f64>)], n: usize) -> Vector3<f64> {
         .sum::<Vector3<f64>>()
         / stt;
     w_mean - slope * t_mean
-}
-
-/// Largest attitude σ at which a settled alignment ends, rad: the linearisation of the
-/// pseudo-attitude chain (eq. 34) and of eq. (D1) holds there.
-pub const SETTLED_MAX_SIGMA_RAD: f64 = 0.0873;
-/// Span over which the attitude variance must stop shrinking, ns.
-pub const SETTLE_SPAN_NS: i64 = 10_000_000_000;
-/// Share of the variance a settled alignment may still lose over [`SETTLE_SPAN_NS`].
-pub const SETTLED_SHRINK: f64 = 0.2;
-
-/// Whether the alignment has settled: the largest attitude variance `var_rad2` is below
-/// [`SETTLED_MAX_SIGMA_RAD`]² and shrank by less than [`SETTLED_SHRINK`] over the last
-/// [`SETTLE_SPAN_NS`]. An absolute threshold alone (`paper_video_start_sigma_rad`, 0.5°) is
-/// never reached with a consumer-grade IMU, whose process noise holds roll and pitch at a
-/// degree or two: its video chain never started (a simulated fixed wing, consumer IMU, camera:
-/// no rotation fused, yaw 40° off after the 120 s outage). Only the video waits for it: the
-/// alignment's GNSS aiding (the course, while no video chain runs the heading) goes on, since
-/// without it such an IMU's heading drifts freely (17° → 61° RMSE without video when the
-/// settled alignment also ended it). `check` keeps the span's start.
-fn alignment_settled(check: &mut Option<(i64, f64)>, t_ns: i64, var_rad2: f64) -> bool {
-    if var_rad2 > SETTLED_MAX_SIGMA_RAD.powi(2) {
-        *check = None;
-        return false;
-    }
-    match *check {
-        Some((t0, v0)) if t_ns - t0 >= SETTLE_SPAN_NS => {
-            if var_rad2 >= (1.0 - SETTLED_SHRINK) * v0 {
-                return true;
-            }
-            *check = Some((t_ns, var_rad2));
-            false
-        }
-        Some(_) => false,
-        None => {
-            *check = Some((t_ns, var_rad2));
-            false
-        }
-    }
 }
