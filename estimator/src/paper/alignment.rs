@@ -38,34 +38,27 @@ pub(super) fn gnss_attitude_aiding(
         return;
     };
     let (r, p, y) = q.euler_angles();
-    let y = if moving {
-        // At the filter's roll and pitch when this fix's own are not fused: they carry the
-        // GNSS acceleration's noise (12° for a receiver 0.3 m/s noisy at 5 Hz, which put the
-        // heading 5° off at a σ of 0.6°).
-        match tilt_sigma {
-            Some(_) => heading_without_sideslip(r, p, vel_n),
-            None => heading_without_sideslip(att.euler.x, att.euler.y, vel_n),
+    let (y, course_sigma) = match (moving, tilt_sigma) {
+        (false, _) => (y, course_sigma),
+        (true, Some(_)) => (heading_without_sideslip(r, p, vel_n), course_sigma),
+        // Solved at the filter's roll and pitch when this fix's own are not fused: they carry
+        // the GNSS acceleration's noise (12° for a receiver 0.3 m/s noisy at 5 Hz, which put the
+        // heading 5° off at a σ of 0.6°). That heading moves with the roll and pitch it is
+        // solved at (by tan(roll) per unit of pitch in a bank): their uncertainty is the
+        // course's too (eq. C1), by central differences.
+        (true, None) => {
+            let (r0, p0) = (att.euler.x, att.euler.y);
+            let y0 = heading_without_sideslip(r0, p0, vel_n);
+            let dy = |a: f64, b: f64| {
+                uavnav_core::rotation::wrap_pi(heading_without_sideslip(a, b, vel_n) - y0)
+            };
+            let d = 1e-4;
+            let dr = (dy(r0 + d, p0) - dy(r0 - d, p0)) / (2.0 * d);
+            let dp = (dy(r0, p0 + d) - dy(r0, p0 - d)) / (2.0 * d);
+            let p_e = att.p_euler();
+            let var = dr * dr * p_e[(0, 0)] + dp * dp * p_e[(1, 1)] + 2.0 * dr * dp * p_e[(0, 1)];
+            (y0, (course_sigma * course_sigma + var.max(0.0)).sqrt())
         }
-    } else {
-        y
-    };
-    // That heading moves with the roll and pitch it is solved at (by tan(roll) per unit of pitch
-    // in a bank): their uncertainty is the course's too (eq. C1), by central differences.
-    let course_sigma = if tilt_sigma.is_none() && moving {
-        let p_e = att.p_euler();
-        let d = 1e-4;
-        let (r0, p0) = (att.euler.x, att.euler.y);
-        let dy = |a: f64, b: f64| {
-            uavnav_core::rotation::wrap_pi(
-                heading_without_sideslip(a, b, vel_n) - heading_without_sideslip(r0, p0, vel_n),
-            )
-        };
-        let dr = (dy(r0 + d, p0) - dy(r0 - d, p0)) / (2.0 * d);
-        let dp = (dy(r0, p0 + d) - dy(r0, p0 - d)) / (2.0 * d);
-        let var = dr * dr * p_e[(0, 0)] + dp * dp * p_e[(1, 1)] + 2.0 * dr * dp * p_e[(0, 1)];
-        (course_sigma * course_sigma + var.max(0.0)).sqrt()
-    } else {
-        course_sigma
     };
     let course_sigma = moving.then_some(course_sigma);
     att.update_euler(
