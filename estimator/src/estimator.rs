@@ -169,8 +169,10 @@ impl Estimator {
         self.divergence_resets = resets;
     }
 
-    /// Adds a GNSS fix (fused at its time of validity, its stamp less the configured GNSS delay,
-    /// behind the newest IMU sample; `eskf` learns the velocity's own delay, `crate::gnss_delay`).
+    /// Adds a GNSS fix, dated at its time of validity, its stamp less the configured GNSS delay.
+    /// `eskf` fuses it there, behind the newest IMU sample, and learns the velocity's own delay
+    /// (`crate::gnss_delay`); `paper` fuses it at once, as the paper's filters do (the date only
+    /// picks the body rate of its lever-arm velocity).
     pub fn push_gnss(&mut self, fix: &GnssFix) -> Result<(), InputError> {
         // EGM96 N at the fix for MSL (NaN for a non-finite position: refused below like the fix).
         let alt_m = self

@@ -78,8 +78,9 @@ pub struct ReadArgs {
     /// GNSS delay, s (a fix stamped t was valid at t − delay), replacing the dataset's: for a
     /// flight log the autopilot's own parameter (ArduPilot EK3_GPS_DELAY / EK2_GPS_DELAY /
     /// EKF_POS_DELAY, PX4 EKF2_GPS_DELAY); for ASL gnss0/sensor.yaml `delay_s`. Fixes keep their
-    /// logged stamps; the estimator subtracts the delay (the `eskf` profile then learns the GNSS
-    /// velocity's own delay from the data; `estimate` prints it when it differs).
+    /// logged stamps; the `eskf` profile fuses each fix at its stamp less the delay and then
+    /// learns the GNSS velocity's own delay from the data (`estimate` prints it when it
+    /// differs); `paper`, like the paper's filters, fuses a fix when it arrives.
     #[arg(long, value_name = "SECONDS")]
     pub gnss_delay_s: Option<f64>,
     /// Flight logs: import what comes before the first corrupt byte instead of failing with the
