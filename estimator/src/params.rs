@@ -202,6 +202,22 @@ pub struct EstimatorParams {
     /// receiver's cold start (30–60 s) or a vehicle that has none. A vehicle configured without
     /// GNSS starts as soon as it is level. `f64::INFINITY`: never without GNSS.
     pub start_without_gnss_after_s: f64,
+    /// `eskf`: a filter that had GNSS and has fused no horizontal position or velocity (GNSS or
+    /// vision) for `aid_timeout_ns` stops dead reckoning once it no longer knows where it is
+    /// (horizontal position σ beyond `noaid_pos_sigma_m`) and its tilt σ has grown past this,
+    /// rad: it then holds its position (`aid_sources::position_hold`, as a filter started without
+    /// GNSS does) and reports attitude only until GNSS comes back (`eskf::outage`). A good IMU
+    /// coasts through a minute's outage with its tilt σ well under a degree and is left to do
+    /// so; the shared fixed wing's 10 Hz IMU log passed 3° within 5 s of losing its fixes (its
+    /// tilt σ is 1.4–1.8° with them). `f64::INFINITY`: dead reckoning without limit.
+    pub dead_reckoning_max_tilt_sigma_rad: f64,
+    /// `eskf`: 1-σ of the gyro's scale-factor error, as a fraction (MEMS gyros of the MPU-6000
+    /// class state ±3 % as built, uncalibrated). The filter does not estimate it: while the
+    /// heading is observed (GNSS velocity, compass, vision) the bias state and the heading's
+    /// own corrections absorb it at the turn rate flown; once nothing observes the heading, each
+    /// radian turned about the vertical adds this much of a radian of yaw error, and the reported
+    /// yaw σ grows by it (`eskf::outage`; only the σ reported, not the filter's covariance).
+    pub gyro_scale_sigma: f64,
     /// `eskf` without position aiding: 1-σ of the position-hold pseudo-measurement that keeps the
     /// velocity, and through it the tilt, bounded (`aid_sources::position_hold`), m, fused every
     /// 0.2 s. PX4 fuses the same "fake position" with 10 m (`EKF2_NOAID_NOISE`), but the hold's
@@ -270,6 +286,8 @@ impl Default for EstimatorParams {
             yaw_estimator: crate::yaw_estimator::YawEstimatorParams::default(),
             yaw_reset_timeout_ns: 1_000_000_000,
             start_without_gnss_after_s: 10.0,
+            dead_reckoning_max_tilt_sigma_rad: 3f64.to_radians(),
+            gyro_scale_sigma: 0.03,
             noaid_pos_sigma_m: 30.0,
             unknown_declination_sigma_rad: 10f64.to_radians(),
         }

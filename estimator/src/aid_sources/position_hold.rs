@@ -15,11 +15,13 @@
 //! a few `σ`.
 //!
 //! Lifecycle:
-//! * **off** until the filter starts without GNSS (`eskf::gnssless`);
+//! * **off** until the filter starts without GNSS (`eskf::gnssless`), or until a filter that had
+//!   GNSS has dead-reckoned past what it can (`eskf::outage`: held where it was then);
 //! * **active**: fused every [`HOLD_PERIOD_NS`] at the horizon; the vertical only when nothing
 //!   else holds the height (a barometer does); no other position or velocity source runs
 //!   meanwhile (vision gives rotation only without GNSS);
-//! * **stopped** for good once GNSS starts the filter properly (the filter is rebuilt).
+//! * **stopped** once GNSS is back (a filter started without GNSS is rebuilt; after an outage the
+//!   fix resets the position and velocity); a later outage starts it again.
 //!
 //! Diagnostics: the innovation, its variance and the test ratio before the weighting; a
 //! down-weighted update counts as `rejected` (the vehicle is moving away from the hold point).
@@ -41,7 +43,7 @@ pub enum HoldState {
     Off,
     /// Fusing the hold point.
     Active,
-    /// Stopped for good (GNSS has started the filter).
+    /// Stopped: GNSS is back (an outage later starts it again).
     Stopped,
 }
 
@@ -80,9 +82,18 @@ impl PositionHold {
         self.state = HoldState::Active;
     }
 
-    /// Stops for good.
+    /// Starts holding at the filter's position now, after an outage of the position sources (a
+    /// hold stopped before starts afresh there).
+    pub fn start_in_outage(&mut self, x: &Nominal) {
+        self.point_ned_m = Some(x.p);
+        self.last_t_ns = None;
+        self.state = HoldState::Active;
+    }
+
+    /// Stops (GNSS is back); the point is forgotten.
     pub fn stop(&mut self) {
         self.state = HoldState::Stopped;
+        self.point_ned_m = None;
     }
 
     /// Fuses the hold point at `t_ns` when active and due (eq. H1); `vertical` also holds the

@@ -58,10 +58,10 @@ impl Eskf {
         self.corrected = true;
     }
 
-    /// Fuses the position hold at the horizon while running without GNSS.
+    /// Fuses the position hold at the horizon while running without GNSS or through an outage.
     pub(super) fn hold_position(&mut self, t_ns: i64) {
         let Some(x) = self.x else { return };
-        if !self.gnssless {
+        if !self.gnssless && !self.outage_hold() {
             return;
         }
         // The barometer holds the height once it has its first sample.
@@ -146,9 +146,10 @@ impl Eskf {
         floor
     }
 
-    /// [`Mode::AttitudeOnly`] while running without GNSS, else `other`.
+    /// [`Mode::AttitudeOnly`] while running without GNSS or holding through an outage
+    /// (`outage`), else `other`.
     pub(super) fn gnssless_mode(&self, other: Mode) -> Mode {
-        if self.gnssless && other != Mode::Diverged {
+        if (self.gnssless || self.outage_hold()) && other != Mode::Diverged {
             Mode::AttitudeOnly
         } else {
             other

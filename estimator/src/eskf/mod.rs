@@ -7,11 +7,13 @@
 //! | this file | the filter's state, horizon stepping, buffered events, GNSS, baro and vision fusion |
 //! | [`heading`] | the heading lifecycle ([`HeadingSource`]), magnetometer and yaw-bank alignment |
 //! | [`gnssless`] | the start without GNSS, attitude only until the first fix |
+//! | [`outage`] | the limit of dead reckoning in a GNSS outage: a position hold until the next fix |
 //! | `report` | mode, health, the pose output, the motion prior for vision |
 
 mod delay;
 mod gnssless;
 mod heading;
+mod outage;
 mod report;
 
 pub use heading::HeadingSource;
@@ -126,6 +128,8 @@ pub struct Eskf {
     first_imu_t_ns: Option<i64>,
     /// The position hold of a filter without position aiding.
     hold: PositionHold,
+    /// Angle turned about the vertical since the heading was last observed, rad (`outage`).
+    unaided_turn_rad: f64,
     /// The GNSS velocity's own delay, learnt (eq. L1; `delay.rs`).
     gnss_delay: GnssDelayLearner,
 }
@@ -251,6 +255,7 @@ impl Eskf {
             gnss_seen: false,
             first_imu_t_ns: None,
             hold: PositionHold::default(),
+            unaided_turn_rad: 0.0,
             gnss_delay: GnssDelayLearner::new(config.gnss.map_or(0, |g| g.delay_ns)),
             params,
         };
@@ -444,6 +449,7 @@ impl Eskf {
         };
         let m = mean_of(&a, &b);
         self.yaw_est.predict(&(m.gyro - bg), &m.accel, dt_s);
+        self.track_unaided_turn(&m.gyro, dt_s);
         self.learn_delay_from_imu(&a, &b, &m.accel);
         if let Some(done) = self.imu.pop_front() {
             // Kept for the lever-arm gyro window around a fix at the horizon.
@@ -466,6 +472,7 @@ impl Eskf {
             );
         }
         self.try_start_without_gnss(b.t_ns);
+        self.limit_dead_reckoning(b.t_ns);
         self.hold_position(b.t_ns);
     }
 
@@ -564,6 +571,11 @@ impl Eskf {
     fn process(&mut self, e: Event, a: &ImuSample, b: &ImuSample) {
         if self.gnssless && matches!(e, Event::Gnss(_)) {
             self.restart_for_gnss();
+        }
+        if let Event::Gnss(m) = &e
+            && self.outage_hold()
+        {
+            self.end_outage_hold(m);
         }
         if self.x.is_none() {
             if let Event::Gnss(m) = e {
@@ -675,8 +687,9 @@ impl Eskf {
         // fix the prediction disagrees with is then no evidence against the fix. So until the
         // heading is aligned, the second fix in a row that the gate refuses is taken with an
         // inflate-and-fuse reset, as a long rejection is once aligned (counted in the sources'
-        // `resets`).
-        let reset = if self.yaw_aligned {
+        // `resets`). So is the second refused fix after an outage (`outage`): then the
+        // prediction is what is in doubt, not the fix.
+        let reset = if self.yaw_aligned && !self.after_outage(m.t_ns) {
             self.params.gnss_reset_timeout_ns
         } else {
             0

@@ -105,7 +105,8 @@ impl Eskf {
             .map(|v| v.max(0.0).sqrt())
         };
         let mut cov_th: Matrix3<f64> = self.p.fixed_view::<3, 3>(ITH, ITH).into_owned();
-        cov_th[(2, 2)] = cov_th[(2, 2)].max(self.reported_yaw_floor_rad().powi(2));
+        cov_th[(2, 2)] = cov_th[(2, 2)].max(self.reported_yaw_floor_rad().powi(2))
+            + self.unaided_turn_sigma_rad().powi(2);
         let (r, p_, y) = o.q.euler_angles();
         let euler_rad = Vector3::new(r, p_, y);
         Some(PoseOutput {
