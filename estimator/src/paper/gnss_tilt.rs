@@ -197,6 +197,12 @@ impl GnssTilt {
         }
     }
 
+    /// Drops the running window (the next fix or hold starts one): its start velocity no longer
+    /// matches what will be compared with it (a hold's zero after a fix's, or back).
+    pub fn drop_window(&mut self) {
+        self.window = None;
+    }
+
     /// The same source started again: its bias prior kept, all else as new.
     pub fn restarted(&self) -> Self {
         Self::new(self.bias_prior.0, self.bias_prior.1)

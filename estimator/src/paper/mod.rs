@@ -49,6 +49,7 @@ pub mod attitude;
 pub mod gnss_tilt;
 mod gnssless;
 pub mod heading;
+mod outage;
 pub mod posvel;
 mod report;
 mod video;
@@ -70,6 +71,7 @@ pub use alignment::{
 };
 use alignment::{alignment_settled, course_sigma_rad, gnss_attitude_aiding};
 use attitude::{AttitudeEkf, DirectionMeas};
+use outage::track_unaided_turn;
 use posvel::PosVelEkf;
 
 /// Window of the mean body rate used in the lever-arm velocity of eq. (33), ns.
@@ -157,6 +159,11 @@ pub struct PaperFilter {
     first_imu_t_ns: Option<i64>,
     /// Running without GNSS (`gnssless`, our addition): attitude only.
     gnssless: bool,
+    /// Roll and pitch held against a velocity held at zero through an outage (`outage`, our
+    /// addition).
+    outage_tilt_hold: bool,
+    /// Angle turned about the vertical since the heading was last observed, rad (`outage`).
+    unaided_turn_rad: f64,
     /// The frame is `gnssless`'s provisional one (no origin configured, no fix yet).
     frame_provisional: bool,
 }
@@ -251,6 +258,8 @@ impl PaperFilter {
             has_gnss: config.gnss.is_some(),
             first_imu_t_ns: None,
             gnssless: false,
+            outage_tilt_hold: false,
+            unaided_turn_rad: 0.0,
             frame_provisional: false,
         };
         if let Some(o) = origin {
@@ -289,6 +298,8 @@ impl PaperFilter {
         fresh.heading.restart();
         fresh.first_imu_t_ns = None;
         fresh.gnssless = false;
+        fresh.outage_tilt_hold = false;
+        fresh.unaided_turn_rad = 0.0;
         fresh.frame_provisional = false;
         *self = fresh;
         if let Some(o) = cfg_frame {
@@ -341,6 +352,11 @@ impl PaperFilter {
         };
         self.heading.add_imu(&gyro, &m.accel, dt_s);
         let c = att.rotation();
+        let observed = att.video_active()
+            || self
+                .last_fix
+                .is_some_and(|(f, _)| s.t_ns - f.t_ns <= self.params.aid_timeout_ns);
+        track_unaided_turn(&mut self.unaided_turn_rad, observed, &(c * gyro), dt_s);
         let att_var = att.p_euler().trace() / 3.0;
         let g = self
             .gravity
@@ -380,6 +396,7 @@ impl PaperFilter {
         } else {
             self.vio2 = None;
         }
+        self.hold_tilt_in_outage(s.t_ns, &frame);
         self.output(s.t_ns)
     }
 
@@ -433,6 +450,7 @@ impl PaperFilter {
             self.fixes_without_velocity += 1;
             return;
         };
+        self.end_outage_tilt_hold();
         let f_mean = if self.f_sum.1 > 0 {
             self.f_sum.0 / self.f_sum.1 as f64
         } else {
@@ -553,13 +571,22 @@ impl PaperFilter {
             let video = att.video_active();
             self.gnss_tilt.at_fix(&fix, att, video, gate);
         }
+        // After an outage the prediction is what is in doubt: the second refused fix resets
+        // (as `eskf` does; our addition), not a 5 s run of them.
+        let last_fused = self.health.gnss_pos.last_fused_t_ns;
+        let after_outage =
+            last_fused != i64::MIN && meas.t_ns - last_fused > self.params.aid_timeout_ns;
         gi.update_gnss(
             &meas,
             att,
             &self.lever_b,
             &w_nb,
             gate,
-            self.params.gnss_reset_timeout_ns,
+            if after_outage {
+                0
+            } else {
+                self.params.gnss_reset_timeout_ns
+            },
             &mut self.health.gnss_pos,
             &mut self.health.gnss_vel,
         );

@@ -143,6 +143,9 @@ impl PaperFilter {
         if !att.video_active() {
             sigma_att.z = sigma_att.z.max(self.heading.reported_sigma_floor_rad());
         }
+        sigma_att.z = sigma_att
+            .z
+            .hypot(self.params.gyro_scale_sigma * self.unaided_turn_rad);
         Some(PoseOutput {
             t_ns,
             lla: frame.ned_to_lla(&pv.x),
