@@ -343,6 +343,14 @@ impl AttitudeEkf {
         self.bias_sd.z = 0.0;
     }
 
+    /// Adds `var` (rad²) to the yaw variance: heading uncertainty the process model did not
+    /// carry (see `paper::outage`).
+    pub fn widen_yaw(&mut self, var: f64) {
+        if var.is_finite() && var > 0.0 {
+            self.p[(2, 2)] += var;
+        }
+    }
+
     /// Adds `var` (rad²) to the roll and pitch variances.
     pub fn widen_tilt(&mut self, var: f64) {
         self.p[(0, 0)] += var;

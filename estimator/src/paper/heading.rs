@@ -25,7 +25,10 @@
 //!   cannot) without counting as converged (a long turn), by more than
 //!   [`GROSS_CONTRADICTION_RAD`] for [`GROSS_CONTRADICTION_NS`]: the yaw is set to the bank's
 //!   again, counted in the health's `yaw_resets`;
-//! - back to **starting** with the filters at a restart (the divergence check).
+//! - back to **starting** with the filters at a restart (the divergence check), and at the end
+//!   of a GNSS outage that lost the heading ([`BankHeading::restart_search`], from
+//!   `paper::outage`): the bank keeps running, and hands its heading over as soon as it can
+//!   tell it, converged or not (a long turn); counted in `yaw_resets`.
 //!
 //! The disagreement with the bank and its test ratio are computed at every fix while the bank
 //! can tell the heading, whether or not anything is reset.
@@ -75,6 +78,9 @@ pub struct BankHeading {
     pub test_ratio: f64,
     /// Heading resets to the bank after the first alignment.
     pub resets: u32,
+    /// Starting again after an outage lost the heading ([`Self::restart_search`]): a bank that
+    /// can tell the heading hands it over without counting as converged.
+    refinding: bool,
 }
 
 impl BankHeading {
@@ -90,6 +96,7 @@ impl BankHeading {
             contradicted_since_ns: None,
             test_ratio: 0.0,
             resets: 0,
+            refinding: false,
         }
     }
 
@@ -97,6 +104,17 @@ impl BankHeading {
     pub fn restart(&mut self) {
         let enabled = self.state != BankState::Off;
         *self = Self::new(*self.bank_params(), enabled);
+    }
+
+    /// Back to **starting** with a fresh bank, keeping the reset count: the heading must be
+    /// found again (see `paper::outage`). Nothing happens while the source is off.
+    pub fn restart_search(&mut self) {
+        if self.state == BankState::Off {
+            return;
+        }
+        self.state = BankState::Starting;
+        self.contradicted_since_ns = None;
+        self.refinding = true;
     }
 
     fn bank_params(&self) -> &YawEstimatorParams {
@@ -131,10 +149,17 @@ impl BankHeading {
         }
         self.bank.fuse_velocity(t_ns, vel_h_mps, sigma_vel_mps);
         if self.state == BankState::Starting {
-            if let Some((yaw, sigma)) = self.bank.converged_yaw() {
+            let found = self
+                .bank
+                .converged_yaw()
+                .or_else(|| self.refinding.then(|| self.telling_yaw()).flatten());
+            if let Some((yaw, sigma)) = found {
                 att.set_yaw(yaw, sigma.max(MIN_HANDOVER_SIGMA_RAD));
                 self.state = BankState::Active;
                 self.test_ratio = 0.0;
+                if std::mem::take(&mut self.refinding) {
+                    self.resets += 1;
+                }
             }
             return;
         }
@@ -147,13 +172,7 @@ impl BankHeading {
         // disagreement with an unsteady bank took a 10 Hz-IMU plane's roll and pitch from 5° to
         // 8–14° of RMSE.
         let converged = self.bank.converged_yaw();
-        let telling = match (self.bank.yaw(), self.bank.honest_sigma_rad()) {
-            (Some((yaw, _)), Some(s)) if s < self.bank_params().converged_sigma_rad => {
-                Some((yaw, s))
-            }
-            _ => None,
-        };
-        let Some((yaw, sigma)) = converged.or(telling) else {
+        let Some((yaw, sigma)) = converged.or_else(|| self.telling_yaw()) else {
             self.contradicted_since_ns = None;
             return;
         };
@@ -177,6 +196,17 @@ impl BankHeading {
             att.set_yaw(yaw, sigma.max(MIN_HANDOVER_SIGMA_RAD));
             self.resets += 1;
             self.contradicted_since_ns = None;
+        }
+    }
+
+    /// The bank's heading and honest σ while it can tell the heading (that σ below
+    /// `converged_sigma_rad`), converged or not (a long turn).
+    fn telling_yaw(&self) -> Option<(f64, f64)> {
+        match (self.bank.yaw(), self.bank.honest_sigma_rad()) {
+            (Some((yaw, _)), Some(s)) if s < self.bank_params().converged_sigma_rad => {
+                Some((yaw, s))
+            }
+            _ => None,
         }
     }
 

@@ -451,6 +451,7 @@ impl PaperFilter {
             return;
         };
         self.end_outage_tilt_hold();
+        self.widen_yaw_for_unaided_turn();
         let f_mean = if self.f_sum.1 > 0 {
             self.f_sum.0 / self.f_sum.1 as f64
         } else {

@@ -13,9 +13,16 @@
 //!
 //! The reported yaw σ grows with the angle turned about the vertical while neither a fix nor
 //! video observes the heading (`gyro_scale_sigma` per radian, as in `eskf::outage`: the gyro's
-//! scale-factor error; only the σ reported).
+//! scale-factor error). At the next fix the filter's yaw variance takes that term too
+//! ([`PaperFilter::widen_yaw_for_unaided_turn`]), so that the course or the yaw bank can pull
+//! back a heading that drifted unobserved.
 
 use super::*;
+
+/// Yaw σ past which the heading counts as lost at the end of an outage, rad: the alignment's
+/// settled bound ([`alignment::SETTLED_MAX_SIGMA_RAD`], 5°), beyond which its linearisations
+/// (and the GNSS acceleration's heading correction) are no longer trusted.
+const LOST_HEADING_SIGMA_RAD: f64 = alignment::SETTLED_MAX_SIGMA_RAD;
 
 /// Adds the angle turned about the vertical over `dt_s` (`gyro_n`, the rate in the navigation
 /// frame) to `turn_rad`, or zeroes it when the heading is `observed`.
@@ -63,6 +70,33 @@ impl PaperFilter {
         };
         self.gnss_tilt
             .at_hold(&hold, att, false, self.params.gate_sigma);
+    }
+
+    /// At the first fix after an outage: the yaw variance takes the scale-factor term the
+    /// reported σ carried (module doc), so that the course or the yaw bank can correct a heading
+    /// that drifted unobserved. Without it the filter's own σ, ~11° after 120 s of circling on
+    /// the shared fixed wing while the heading was 110° off, let the course pull it back over a
+    /// minute, with roll and pitch 4–7° off meanwhile.
+    pub(super) fn widen_yaw_for_unaided_turn(&mut self) {
+        let turn_rad = std::mem::take(&mut self.unaided_turn_rad);
+        let Some(att) = self.att.as_mut() else { return };
+        att.widen_yaw((self.params.gyro_scale_sigma * turn_rad).powi(2));
+        if turn_rad == 0.0
+            || att.video_active()
+            || att.p_euler()[(2, 2)] <= LOST_HEADING_SIGMA_RAD.powi(2)
+        {
+            return;
+        }
+        if self.course_heading {
+            // The alignment's course pseudo-measurement takes the heading again (the GNSS
+            // acceleration of `gnss_tilt` corrects only a small yaw error).
+            self.aligned = false;
+        } else {
+            // The bank's models drifted with the same gyro and still weigh their hypotheses
+            // by what they saw before the outage; a 3σ contradiction with a filter this wide
+            // never comes. A fresh bank finds the heading from the accelerations to come.
+            self.heading.restart_search();
+        }
     }
 
     /// Ends the outage's tilt hold, if one runs (module doc).
