@@ -81,6 +81,14 @@ fn outage(
     }
 }
 
+/// The defaults with dead reckoning never ended by the tilt σ (the behaviour before the hold).
+fn without_tilt_limit() -> EstimatorParams {
+    EstimatorParams {
+        dead_reckoning_max_tilt_sigma_rad: f64::INFINITY,
+        ..EstimatorParams::default()
+    }
+}
+
 fn report(name: &str, from_s: i64, len_s: i64, o: &Outage, label: &str) {
     let (d, a) = (&o.during, &o.after);
     eprintln!(
@@ -117,10 +125,7 @@ fn plane_e_through_gnss_outages() {
     };
     let f = RealFlight::read(&dir);
     for from_s in [250, 350, 450] {
-        let unlimited = EstimatorParams {
-            dead_reckoning_max_tilt_sigma_rad: f64::INFINITY,
-            ..EstimatorParams::default()
-        };
+        let unlimited = without_tilt_limit();
         report(
             "plane_E",
             from_s,
@@ -164,10 +169,7 @@ fn copter_218_through_a_gnss_outage() {
         return;
     };
     let f = RealFlight::read(&dir);
-    let unlimited = EstimatorParams {
-        dead_reckoning_max_tilt_sigma_rad: f64::INFINITY,
-        ..EstimatorParams::default()
-    };
+    let unlimited = without_tilt_limit();
     report(
         "copter_218",
         150,
@@ -202,10 +204,7 @@ fn paper_on_plane_e_through_gnss_outages() {
     };
     let f = RealFlight::read(&dir);
     for from_s in [250, 350, 450] {
-        let unlimited = EstimatorParams {
-            dead_reckoning_max_tilt_sigma_rad: f64::INFINITY,
-            ..EstimatorParams::default()
-        };
+        let unlimited = without_tilt_limit();
         let o = outage(&f, FilterProfile::Paper, from_s, 120, unlimited);
         report("paper plane_E", from_s, 120, &o, "no limit");
         let o = outage(
