@@ -220,3 +220,66 @@ impl BankHeading {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{UnitQuaternion, Vector2, Vector3};
+    use uavnav_core::rotation::wrap_pi;
+
+    /// Flies a vehicle of heading `yaw0` sideways and back (body accelerations along y only) for
+    /// `n` 10 ms steps from step `k0`, feeding `src` and `att` as the paper filter does.
+    fn fly(
+        src: &mut BankHeading,
+        att: &mut AttitudeEkf,
+        yaw0: f64,
+        v: &mut Vector2<f64>,
+        k0: i64,
+        n: i64,
+    ) {
+        let dt = 0.01;
+        let q = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw0);
+        for k in k0..k0 + n {
+            let t = k as f64 * dt;
+            let a_b = Vector3::new(0.0, 1.5 * (std::f64::consts::TAU * t / 8.0).sin(), 0.0);
+            let a_n = q.transform_vector(&a_b);
+            *v += Vector2::new(a_n.x, a_n.y) * dt;
+            let f_b = a_b - q.inverse_transform_vector(&Vector3::new(0.0, 0.0, 9.80665));
+            src.add_imu(&Vector3::zeros(), &f_b, dt);
+            if k % 20 == 0 {
+                src.at_fix(k * 10_000_000, *v, 0.2, att, 5_000_000_000);
+            }
+        }
+    }
+
+    #[test]
+    fn a_heading_lost_in_an_outage_is_handed_over_again() {
+        let yaw0 = 1.0;
+        let mut src = BankHeading::new(YawEstimatorParams::default(), true);
+        let mut att = AttitudeEkf::new(Vector3::zeros(), Vector3::repeat(0.5), 0);
+        let mut v = Vector2::zeros();
+        fly(&mut src, &mut att, yaw0, &mut v, 0, 6000);
+        assert_eq!(src.state, BankState::Active);
+        assert!(wrap_pi(att.euler.z - yaw0).abs() < 5f64.to_radians());
+        // An outage left the heading 100° off with a σ of 60°: within 3σ of the bank, so the
+        // contradiction test never fires.
+        att.set_yaw(yaw0 + 100f64.to_radians(), 60f64.to_radians());
+        fly(&mut src, &mut att, yaw0, &mut v, 6000, 200);
+        assert!(wrap_pi(att.euler.z - yaw0).abs() > 90f64.to_radians());
+        assert_eq!(src.resets, 0);
+        // Declared lost: the next fix hands the bank's heading over.
+        src.restart_search();
+        assert_eq!(src.state, BankState::Starting);
+        fly(&mut src, &mut att, yaw0, &mut v, 6200, 21);
+        assert_eq!(src.state, BankState::Active);
+        assert!(wrap_pi(att.euler.z - yaw0).abs() < 5f64.to_radians());
+        assert_eq!(src.resets, 1);
+    }
+
+    #[test]
+    fn an_unused_source_stays_off() {
+        let mut src = BankHeading::new(YawEstimatorParams::default(), false);
+        src.restart_search();
+        assert_eq!((src.state, src.resets), (BankState::Off, 0));
+    }
+}
