@@ -106,8 +106,9 @@ impl BankHeading {
         *self = Self::new(*self.bank_params(), enabled);
     }
 
-    /// Back to **starting** with a fresh bank, keeping the reset count: the heading must be
-    /// found again (see `paper::outage`). Nothing happens while the source is off.
+    /// Back to **starting**, the bank left running: the heading must be found again (see
+    /// `paper::outage`); the next hand-over counts as a reset. Nothing happens while the
+    /// source is off.
     pub fn restart_search(&mut self) {
         if self.state == BankState::Off {
             return;

@@ -75,8 +75,8 @@ impl PaperFilter {
     /// At the first fix after an outage: the yaw variance takes the scale-factor term the
     /// reported σ carried (module doc), so that the course or the yaw bank can correct a heading
     /// that drifted unobserved. Without it the filter's own σ, ~11° after 120 s of circling on
-    /// the shared fixed wing while the heading was 110° off, let the course pull it back over a
-    /// minute, with roll and pitch 4–7° off meanwhile.
+    /// the shared fixed wing while the heading was 110° off, held the bank's reset back for
+    /// 15 s and its heading came back over a minute, with roll and pitch 4–7° off meanwhile.
     pub(super) fn widen_yaw_for_unaided_turn(&mut self) {
         let turn_rad = std::mem::take(&mut self.unaided_turn_rad);
         let Some(att) = self.att.as_mut() else { return };
@@ -92,9 +92,9 @@ impl PaperFilter {
             // acceleration of `gnss_tilt` corrects only a small yaw error).
             self.aligned = false;
         } else {
-            // The bank's models drifted with the same gyro and still weigh their hypotheses
-            // by what they saw before the outage; a 3σ contradiction with a filter this wide
-            // never comes. A fresh bank finds the heading from the accelerations to come.
+            // A 3σ contradiction with a filter this wide never comes: the bank (left running;
+            // restarting it from scratch never converged in a circle) hands its heading over
+            // at the first fix where it can tell it.
             self.heading.restart_search();
         }
     }
