@@ -152,7 +152,7 @@ pub struct EstimatorParams {
     /// Paper profile, OUR ADDITION (not in the paper): the heading of a vehicle whose course is
     /// not its heading (a multirotor, unless `course_heading`) from the yaw-hypothesis bank fed by
     /// the IMU and the GNSS velocity (`paper::heading`), handed to the attitude filter once the
-    /// bank has converged and reset to it when the two disagree for `yaw_reset_timeout_ns`.
+    /// bank has converged and reset to it when the two disagree for `paper::heading::CONTRADICTION_NS`.
     /// Without it such a vehicle has no heading in this profile (its yaw σ says so). `false`
     /// gives the paper's filter as written.
     pub paper_yaw_bank: bool,
@@ -192,8 +192,8 @@ pub struct EstimatorParams {
     pub baro_offset_walk_m_per_sqrt_s: f64,
     /// Tuning of the yaw estimator (Gaussian sum of heading hypotheses).
     pub yaw_estimator: crate::yaw_estimator::YawEstimatorParams,
-    /// With the heading aligned from the yaw estimator and no magnetometer: GNSS velocity rejected
-    /// this long while the yaw estimator disagrees beyond 3σ resets the heading to it, ns.
+    /// `eskf`, with the heading aligned from the yaw estimator and no magnetometer: GNSS velocity
+    /// rejected this long while the yaw estimator disagrees beyond 3σ resets the heading to it, ns.
     pub yaw_reset_timeout_ns: i64,
     /// `eskf`: IMU data with no GNSS fix for this long starts the filter without one, s, in
     /// [`crate::Mode::AttitudeOnly`] (`eskf::gnssless`); the first fix then starts it as usual.

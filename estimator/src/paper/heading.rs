@@ -20,7 +20,7 @@
 //!   paper's filter carries the heading (gyro integration, the lever arm, and `gnss_tilt` once
 //!   the yaw σ is small enough for it);
 //! - **reset** when the converged bank and the filter disagree by more than 3σ of their combined
-//!   uncertainty for `yaw_reset_timeout_ns` in a row, or, while the bank can tell the heading
+//!   uncertainty for [`CONTRADICTION_NS`] in a row, or, while the bank can tell the heading
 //!   (its honest σ, [`YawEstimator::honest_sigma_rad`], below `converged_sigma_rad`: a hover
 //!   cannot) without counting as converged (a long turn), by more than
 //!   [`GROSS_CONTRADICTION_RAD`] for [`GROSS_CONTRADICTION_NS`]: the yaw is set to the bank's
@@ -52,6 +52,17 @@ pub const MIN_HANDOVER_SIGMA_RAD: f64 = 0.087; // 5°
 pub const GROSS_CONTRADICTION_RAD: f64 = 0.79; // 45°
 /// ... and for how long it must last, ns.
 pub const GROSS_CONTRADICTION_NS: i64 = 5_000_000_000;
+
+/// How long a converged bank must contradict the filter beyond 3σ before the filter's heading is
+/// reset to it, ns. Nothing else in this profile sees a multirotor's heading (its GPS-IMU filter's
+/// velocity test ratio stays near 0 with the heading 60° off), so the bank's word is not checked
+/// against the filter's own innovations as `eskf` checks it (`yaw_reset_timeout_ns` of GNSS
+/// velocity rejected). A bank can converge, briefly and confidently, on a wrong hypothesis while
+/// the vehicle takes off: on copter_218 it left a right hand-over for a heading 57° off at σ 6°
+/// for 3.5 s, and with a 1 s wait the filter followed it and stayed 60–65° off for 30 s (yaw
+/// RMSE 23.5° against the autopilot's, 14.7° with this wait). The same 5 s as a gross
+/// contradiction.
+pub const CONTRADICTION_NS: i64 = GROSS_CONTRADICTION_NS;
 
 /// Where the heading source stands.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -118,6 +129,11 @@ impl BankHeading {
         self.refinding = true;
     }
 
+    /// The bank itself (diagnostics).
+    pub fn bank(&self) -> &YawEstimator {
+        &self.bank
+    }
+
     fn bank_params(&self) -> &YawEstimatorParams {
         self.bank.params()
     }
@@ -135,15 +151,13 @@ impl BankHeading {
     }
 
     /// A fix's horizontal velocity (N, E, m/s, σ m/s): the bank's update, then the hand-over or
-    /// the reset of the attitude filter's heading. `reset_timeout_ns` is how long a contradiction
-    /// must last before the reset.
+    /// the reset of the attitude filter's heading.
     pub fn at_fix(
         &mut self,
         t_ns: i64,
         vel_h_mps: nalgebra::Vector2<f64>,
         sigma_vel_mps: f64,
         att: &mut AttitudeEkf,
-        reset_timeout_ns: i64,
     ) {
         if self.state == BankState::Off {
             return;
@@ -165,7 +179,7 @@ impl BankHeading {
             return;
         }
         // After the hand-over: the converged bank (its heading holding still) resets the filter
-        // on a 3σ disagreement lasting `reset_timeout_ns`. A vehicle in a long turn never holds
+        // on a 3σ disagreement lasting [`CONTRADICTION_NS`]. A vehicle in a long turn never holds
         // its heading still, so the bank never counts as converged there while it can tell the
         // heading (its honest σ small): a fixed wing of unknown airframe circling for minutes
         // drifted 50–120° from the bank, with σ 4–8°. Then only a gross contradiction resets,
@@ -181,7 +195,7 @@ impl BankHeading {
         let s = (att.p[(2, 2)].max(0.0) + sigma * sigma).sqrt();
         self.test_ratio = d.abs() / (3.0 * s).max(1e-9);
         let (bound, timeout_ns) = if converged.is_some() {
-            (3.0 * s, reset_timeout_ns)
+            (3.0 * s, CONTRADICTION_NS)
         } else {
             (
                 (3.0 * s).max(GROSS_CONTRADICTION_RAD),
@@ -248,7 +262,7 @@ mod tests {
             let f_b = a_b - q.inverse_transform_vector(&Vector3::new(0.0, 0.0, 9.80665));
             src.add_imu(&Vector3::zeros(), &f_b, dt);
             if k % 20 == 0 {
-                src.at_fix(k * 10_000_000, *v, 0.2, att, 5_000_000_000);
+                src.at_fix(k * 10_000_000, *v, 0.2, att);
             }
         }
     }
@@ -275,6 +289,28 @@ mod tests {
         assert_eq!(src.state, BankState::Active);
         assert!(wrap_pi(att.euler.z - yaw0).abs() < 5f64.to_radians());
         assert_eq!(src.resets, 1);
+    }
+
+    #[test]
+    fn a_converged_bank_resets_the_heading_only_after_a_lasting_contradiction() {
+        let yaw0 = -0.5;
+        let mut src = BankHeading::new(YawEstimatorParams::default(), true);
+        let mut att = AttitudeEkf::new(Vector3::zeros(), Vector3::repeat(0.5), 0);
+        let mut v = Vector2::zeros();
+        fly(&mut src, &mut att, yaw0, &mut v, 0, 6000);
+        assert_eq!(src.state, BankState::Active);
+        assert!(src.bank().converged_yaw().is_some());
+        // The filter's heading 60° off at σ 2°: far beyond 3σ of the converged bank.
+        att.set_yaw(yaw0 + 60f64.to_radians(), 2f64.to_radians());
+        // 4 s of contradiction: not yet (a bank can be confidently wrong that long).
+        fly(&mut src, &mut att, yaw0, &mut v, 6000, 400);
+        assert_eq!(src.resets, 0);
+        assert!(src.test_ratio > 1.0);
+        assert!(wrap_pi(att.euler.z - yaw0).abs() > 50f64.to_radians());
+        // Past `CONTRADICTION_NS`: reset to the bank, counted.
+        fly(&mut src, &mut att, yaw0, &mut v, 6400, 200);
+        assert_eq!(src.resets, 1);
+        assert!(wrap_pi(att.euler.z - yaw0).abs() < 5f64.to_radians());
     }
 
     #[test]

@@ -557,7 +557,6 @@ impl PaperFilter {
             meas.vel_h_mps.unwrap_or_else(|| meas_vel.xy()),
             meas.sigma_vel_mps,
             att,
-            self.params.yaw_reset_timeout_ns,
         );
         let w_nb = gyro - att.rotation().transpose() * self.w_ie;
         let gate = self.params.gate_sigma;
