@@ -52,6 +52,46 @@ pub struct PoseOutput {
     pub aiding: AidingFlags,
 }
 
+/// Where the filter's heading came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum HeadingSource {
+    /// Not known yet: the yaw σ is that of a uniform heading and the yaw is not corrected.
+    #[default]
+    Unknown,
+    /// The magnetometer (against the world magnetic model's declination).
+    Magnetometer,
+    /// The yaw estimator (Gaussian sum fed by GNSS velocity and the IMU).
+    YawEstimator,
+    /// The GNSS course (a vehicle declared a fixed wing, or `course_heading`).
+    Course,
+}
+
+/// The compass's lifecycle as health reports it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum MagStatus {
+    /// No compass sample yet, or none used (not fitted, or the `paper` profile, which reads none).
+    #[default]
+    Off,
+    /// Aligning or fusing its heading.
+    Active,
+    /// Stopped for the flight: the sensor reads a dead field.
+    StoppedDead,
+    /// Stopped for the flight: its heading kept contradicting the converged yaw bank.
+    StoppedContradicted,
+}
+
+/// Where the heading comes from, and the compass's state: what a user needs to trust the yaw.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct HeadingHealth {
+    /// The heading's source now (`Unknown` until one aligns it).
+    pub source: HeadingSource,
+    /// The compass's lifecycle.
+    pub mag: MagStatus,
+    /// Compass samples judged disturbed (strength or inclination off the model's or the
+    /// compass's own typical), never fused.
+    pub mag_disturbed: u64,
+}
+
 /// What the filter is currently running on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum Mode {

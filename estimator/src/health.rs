@@ -3,7 +3,9 @@
 //! [`PoseHealth`], its summary carried by every output (never logged; defined in
 //! `uavnav_core::output` with [`Mode`], as are the conversions from the snapshot here).
 
-pub use uavnav_core::output::{Mode, PoseHealth, SourceSummary};
+pub use uavnav_core::output::{
+    HeadingHealth, HeadingSource, MagStatus, Mode, PoseHealth, SourceSummary,
+};
 
 use crate::aid_sources::InnovDiag;
 
@@ -31,6 +33,8 @@ pub struct Health {
     pub position_hold: InnovDiag,
     /// Heading resets from the yaw estimator after alignment.
     pub yaw_resets: u32,
+    /// The heading's source and the compass's state.
+    pub heading: HeadingHealth,
     /// Filter restarts after a detected divergence (paper profile: roll or pitch far from the
     /// accelerometer's tilt).
     pub divergence_resets: u32,
@@ -66,6 +70,7 @@ impl Default for Health {
             gnss_tilt: InnovDiag::new(),
             position_hold: InnovDiag::new(),
             yaw_resets: 0,
+            heading: HeadingHealth::default(),
             divergence_resets: 0,
             inputs_rejected: 0,
             late_dropped: 0,

@@ -11,6 +11,7 @@ mod real;
 use real::{RealFlight, Score, Use, flight_dir, run, run_with_health, score};
 use uavnav_core::FilterProfile;
 use uavnav_estimator::EstimatorParams;
+use uavnav_estimator::health::{HeadingSource, MagStatus};
 
 const S: i64 = 1_000_000_000;
 
@@ -163,6 +164,21 @@ fn copter_103_dead_compass() {
     // EKF1: roll 0.68°).
     assert!(s.horizontal_rmse_m <= 1.5, "{s}");
     assert!(s.rmse_deg[0] <= 1.5 && s.rmse_deg[1] <= 1.5, "{s}");
+    // Its compass reads all zeros, and the shared folder leaves it out (no `mag0`): health says
+    // the compass is off and the heading comes from the yaw bank. (The dead sensor itself, fed
+    // as zeros, is stopped and said to be: `server/tests/service/e2e_flight.rs`.)
+    let Some(dir) = flight_dir("erle_copter_103") else {
+        return;
+    };
+    let f = RealFlight::read(&dir);
+    let (_, health) = run_with_health(&f, FilterProfile::Eskf, EstimatorParams::default(), ALL);
+    assert_eq!(health.heading.mag, MagStatus::Off, "{:?}", health.heading);
+    assert_eq!(
+        health.heading.source,
+        HeadingSource::YawEstimator,
+        "{:?}",
+        health.heading
+    );
 }
 
 #[test]

@@ -230,6 +230,13 @@ mod tests {
         h.innovation_ratios = Some(Default::default());
         h.counters = Some(Default::default());
         h.vision = Some(Default::default());
+        h.heading = Some(uavnav_proto::v1::HeadingStatus {
+            source: i32::MAX,
+            magnetometer: i32::MAX,
+            magnetometer_disturbed: u64::MAX,
+            yaw_resets: u32::MAX,
+        });
+        h.gnss_velocity_delay_s = Some(f64::MAX);
         let held = std::mem::size_of_val(&h) + prost::Message::encoded_len(&h) + 64;
         assert!(held as u64 <= HEALTH_REPORT_BYTES, "{held} bytes");
     }

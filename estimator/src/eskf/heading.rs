@@ -11,19 +11,7 @@ use crate::aid_sources::mag_heading::{MagState, heading_from_field};
 use crate::init::{set_yaw, yaw_from_course};
 use crate::state::{ITH, IV, set_uncorrelated};
 
-/// Where the filter's heading came from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum HeadingSource {
-    /// Not known yet: the yaw σ is that of a uniform heading and the yaw is not corrected.
-    #[default]
-    Unknown,
-    /// The magnetometer (against the world magnetic model's declination).
-    Magnetometer,
-    /// The yaw estimator (Gaussian sum fed by GNSS velocity and the IMU).
-    YawEstimator,
-    /// The GNSS course (only with `EstimatorParams::course_heading`).
-    Course,
-}
+pub use uavnav_core::output::HeadingSource;
 
 /// Smallest heading disagreement between the compass and the yaw bank that counts as a
 /// contradiction, rad: below it the two agree as well as compasses do.

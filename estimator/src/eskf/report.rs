@@ -6,7 +6,8 @@ use uavnav_core::MotionPrior;
 
 use super::Eskf;
 use crate::aid_sources::InnovDiag;
-use crate::health::{Health, Mode, PoseHealth, SourceSummary};
+use crate::aid_sources::mag_heading::{MagHeadingSource, MagState};
+use crate::health::{HeadingHealth, Health, MagStatus, Mode, PoseHealth, SourceSummary};
 use crate::output::{AidingFlags, PoseOutput, euler_sigma_at};
 use crate::state::{IP, ITH, IV, N};
 
@@ -56,6 +57,7 @@ impl Eskf {
             gnss_tilt: InnovDiag::new(),
             position_hold: self.hold.diag,
             yaw_resets: self.yaw_resets,
+            heading: self.heading_health(),
             divergence_resets: 0,
             inputs_rejected: 0,
             late_dropped: self.late_dropped,
@@ -64,6 +66,27 @@ impl Eskf {
             imu_clipped: self.imu_clipped,
             gnss_velocity_delay_s: Some(self.gnss_delay.diag().delay_s),
             cov_diag,
+        }
+    }
+
+    /// The heading's source and the compass's state.
+    fn heading_health(&self) -> HeadingHealth {
+        let MagHeadingSource {
+            state,
+            disturbed,
+            contradicted,
+            ..
+        } = &self.mag;
+        let mag = match state {
+            MagState::Off => MagStatus::Off,
+            MagState::Active => MagStatus::Active,
+            MagState::Stopped if *contradicted => MagStatus::StoppedContradicted,
+            MagState::Stopped => MagStatus::StoppedDead,
+        };
+        HeadingHealth {
+            source: self.heading,
+            mag,
+            mag_disturbed: *disturbed,
         }
     }
 

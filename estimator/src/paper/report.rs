@@ -2,6 +2,8 @@
 //! health and the pose output (with the stated σ the split filters cannot know by themselves).
 
 use super::*;
+use crate::health::HeadingSource;
+use heading::BankState;
 
 impl PaperFilter {
     /// Motion prior from the gyro samples and the attitude filter.
@@ -55,6 +57,17 @@ impl PaperFilter {
         h.divergence_resets = self.divergence_resets;
         h.gnss_tilt = self.gnss_tilt.diag;
         h.yaw_resets = self.heading.resets;
+        // This profile reads no compass: its heading is the course's (a fixed wing, once the
+        // alignment settled it) or the yaw bank's.
+        h.heading.source = if self.att.is_none() {
+            HeadingSource::Unknown
+        } else if self.course_heading && self.aligned {
+            HeadingSource::Course
+        } else if self.heading.state == BankState::Active {
+            HeadingSource::YawEstimator
+        } else {
+            HeadingSource::Unknown
+        };
         let t = self.imu.back().map(|s| s.t_ns).unwrap_or(0);
         let to = self.params.aid_timeout_ns;
         h.mode = match (&self.att, &self.gps_imu) {

@@ -11,6 +11,7 @@
 //! service converts too.
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use uavnav_core::output::{HeadingHealth, HeadingSource, MagStatus};
 use uavnav_core::{AidingFlags, Lla, Mode, PoseHealth, PoseOutput, SourceSummary};
 
 use super::geometry::{required_vector3, vector3};
@@ -26,6 +27,33 @@ pub fn mode_to_wire(m: Mode) -> v1::EstimatorMode {
         Mode::InertialOnly => v1::EstimatorMode::InertialOnly,
         Mode::Diverged => v1::EstimatorMode::Diverged,
         Mode::AttitudeOnly => v1::EstimatorMode::AttitudeOnly,
+    }
+}
+
+/// The heading's health → wire (`VehicleHealth.heading`), with the heading resets to the yaw bank.
+pub fn heading_to_wire(h: &HeadingHealth, yaw_resets: u32) -> v1::HeadingStatus {
+    let HeadingHealth {
+        source,
+        mag,
+        mag_disturbed,
+    } = *h;
+    let source = match source {
+        HeadingSource::Unknown => v1::HeadingSource::Unknown,
+        HeadingSource::Magnetometer => v1::HeadingSource::Magnetometer,
+        HeadingSource::YawEstimator => v1::HeadingSource::YawEstimator,
+        HeadingSource::Course => v1::HeadingSource::Course,
+    };
+    let mag = match mag {
+        MagStatus::Off => v1::MagnetometerState::Off,
+        MagStatus::Active => v1::MagnetometerState::Active,
+        MagStatus::StoppedDead => v1::MagnetometerState::StoppedDead,
+        MagStatus::StoppedContradicted => v1::MagnetometerState::StoppedContradicted,
+    };
+    v1::HeadingStatus {
+        source: source as i32,
+        magnetometer: mag as i32,
+        magnetometer_disturbed: mag_disturbed,
+        yaw_resets,
     }
 }
 

@@ -113,6 +113,7 @@ impl HealthWindow {
             reorder_depth: reorder_depth.min(u32::MAX as usize) as u32,
             configured: shared.configured.load(std::sync::atomic::Ordering::Relaxed),
             gnss_velocity_delay_s: engine.gnss_velocity_delay_s,
+            heading: engine.heading,
         };
         self.since = now;
         self.counts_at_start = counts;
@@ -134,7 +135,8 @@ pub struct HealthReport {
 }
 
 /// Whether `new` says nothing that `prev` did not: the same vehicle, mode, rates, latencies,
-/// test ratios, counters, vision quality, reorder depth, configuration and GNSS velocity delay;
+/// test ratios, counters, vision quality, reorder depth, configuration, GNSS velocity delay and
+/// heading status;
 /// only the stream time
 /// and the wall clock may differ.
 pub fn repeats(prev: &pb::VehicleHealth, new: &pb::VehicleHealth) -> bool {
@@ -152,6 +154,7 @@ pub fn repeats(prev: &pb::VehicleHealth, new: &pb::VehicleHealth) -> bool {
         reorder_depth,
         configured,
         gnss_velocity_delay_s,
+        heading,
     } = new;
     *vehicle_id == prev.vehicle_id
         && *mode == prev.mode
@@ -163,6 +166,7 @@ pub fn repeats(prev: &pb::VehicleHealth, new: &pb::VehicleHealth) -> bool {
         && *reorder_depth == prev.reorder_depth
         && *configured == prev.configured
         && *gnss_velocity_delay_s == prev.gnss_velocity_delay_s
+        && *heading == prev.heading
 }
 
 /// p50 / p99 / max of the samples (all zero when empty).

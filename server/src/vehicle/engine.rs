@@ -50,6 +50,9 @@ pub struct EngineHealth {
     pub imu_clipped: u64,
     /// The GNSS velocity's delay in use, s (`eskf`: learnt from the data).
     pub gnss_velocity_delay_s: Option<f64>,
+    /// Where the heading comes from and the compass's state (None from an engine that cannot
+    /// tell).
+    pub heading: Option<pb::HeadingStatus>,
 }
 
 /// CPU work for one camera frame, run on the vision pool; its result `V` goes back to the engine

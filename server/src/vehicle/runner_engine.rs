@@ -3,7 +3,7 @@
 
 use uavnav_core::{SensorEvent, VehicleConfig};
 use uavnav_proto::compact::compact_pose;
-use uavnav_proto::convert::output::mode_to_wire;
+use uavnav_proto::convert::output::{heading_to_wire, mode_to_wire};
 use uavnav_proto::v1 as pb;
 use uavnav_runner::{
     Health, NoMeasurement, PoseOutput, RunnerParams, Step, VehicleRunner, VisionDone,
@@ -145,6 +145,7 @@ impl Engine for RunnerEngine {
             divergence_resets: u64::from(h.divergence_resets),
             imu_clipped: h.imu_clipped,
             gnss_velocity_delay_s: h.gnss_velocity_delay_s,
+            heading: Some(heading_to_wire(&h.heading, h.yaw_resets)),
         }
     }
 

@@ -255,3 +255,63 @@ async fn without_gnss(profile: pb::FilterProfile) {
     assert!(latest.position.is_none());
     server.shutdown().await.unwrap();
 }
+
+/// The heading's health rides in every vehicle health report: on a simulated flight with a
+/// compass the heading is the magnetometer's, the compass active and nothing disturbed; with
+/// the same compass reading all zeros (a dead sensor, as on a shared real copter) the compass
+/// is stopped for the flight and says so, and the heading is not the magnetometer's.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_heading_source_and_the_compass_state_reach_health() {
+    // The simulated multirotor: it hovers first, so the compass aligns the heading (the fixed
+    // wings of the other scenarios are declared, and their course aligns it first).
+    let (config, events) = common::sim_flight("multirotor", 12.0);
+    assert!(config.mag.is_some());
+    let dead: Vec<_> = events
+        .iter()
+        .map(|e| match e {
+            SensorEvent::Mag(m) => {
+                let mut m = *m;
+                m.field_t = nalgebra::Vector3::zeros();
+                SensorEvent::Mag(m)
+            }
+            other => other.clone(),
+        })
+        .collect();
+    let server = Server::start(test_config()).await.unwrap();
+    configure_and_feed(&server, "compass", &config, &events).await;
+    configure_and_feed(&server, "dead-compass", &config, &dead).await;
+    let heading = |id: &str| {
+        server
+            .registry()
+            .get(id)
+            .unwrap()
+            .shared
+            .latest_health
+            .borrow()
+            .as_ref()
+            .and_then(|r| r.heading)
+    };
+    let want = pb::HeadingStatus {
+        source: pb::HeadingSource::Magnetometer as i32,
+        magnetometer: pb::MagnetometerState::Active as i32,
+        magnetometer_disturbed: 0,
+        yaw_resets: 0,
+    };
+    assert!(
+        common::eventually(Duration::from_secs(20), || heading("compass") == Some(want)).await,
+        "health says {:?}",
+        heading("compass")
+    );
+    let stopped = |h: Option<pb::HeadingStatus>| {
+        h.is_some_and(|h| {
+            h.magnetometer == pb::MagnetometerState::StoppedDead as i32
+                && h.source != pb::HeadingSource::Magnetometer as i32
+        })
+    };
+    assert!(
+        common::eventually(Duration::from_secs(20), || stopped(heading("dead-compass"))).await,
+        "health says {:?}",
+        heading("dead-compass")
+    );
+    server.shutdown().await.unwrap();
+}

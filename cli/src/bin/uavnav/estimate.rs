@@ -73,6 +73,8 @@ pub struct RunOutput {
     /// The GNSS delay the dataset states, and the GNSS velocity's delay the estimator ended
     /// with (`eskf` learns it from the data), s.
     pub gnss_delay_s: Option<(f64, f64)>,
+    /// Where the heading came from at the end, the compass's state, and the heading resets.
+    pub heading: (uavnav_core::output::HeadingHealth, u32),
 }
 
 /// Inputs the estimator accepted, per sensor.
@@ -214,9 +216,11 @@ pub fn run_dataset(
             }
         }
     }
+    let health = runner.health();
     if out.fed.gnss > 0 {
-        out.gnss_delay_s = stated_delay_s.zip(runner.health().gnss_velocity_delay_s);
+        out.gnss_delay_s = stated_delay_s.zip(health.gnss_velocity_delay_s);
     }
+    out.heading = (health.heading, health.yaw_resets);
     // Truth first; a reference (another estimator's output) only where there is no truth, under
     // its own name, and screened against the fixes first (an autopilot's EKF that failed
     // outright must not be reported as our drift).
@@ -304,6 +308,14 @@ pub fn run(args: Args) -> CliResult {
              {stated:.3} s; positions keep it)"
         );
     }
+    let (heading, yaw_resets) = out.heading;
+    eprintln!(
+        "uavnav: heading at the end: {}; compass {}, {} samples judged disturbed; {yaw_resets} \
+         heading resets to the yaw bank",
+        heading_source_words(heading.source),
+        mag_status_words(heading.mag),
+        heading.mag_disturbed
+    );
     if let Some(dir) = &args.report {
         let Some(comparison) = comparison else {
             return Err(CliError::input(anyhow::anyhow!(
@@ -314,4 +326,26 @@ pub fn run(args: Args) -> CliResult {
         crate::estimate_report::write(dir, &args, &out, &comparison)?;
     }
     Ok(())
+}
+
+/// The heading's source in words (stderr diagnostics).
+fn heading_source_words(s: uavnav_core::output::HeadingSource) -> &'static str {
+    use uavnav_core::output::HeadingSource as H;
+    match s {
+        H::Unknown => "unknown",
+        H::Magnetometer => "from the magnetometer",
+        H::YawEstimator => "from the yaw bank (GNSS velocity and IMU)",
+        H::Course => "from the GNSS course",
+    }
+}
+
+/// The compass's state in words (stderr diagnostics).
+fn mag_status_words(s: uavnav_core::output::MagStatus) -> &'static str {
+    use uavnav_core::output::MagStatus as M;
+    match s {
+        M::Off => "off (none, or not read)",
+        M::Active => "active",
+        M::StoppedDead => "stopped (dead: it reads no field)",
+        M::StoppedContradicted => "stopped (its heading contradicted the yaw bank)",
+    }
 }
