@@ -106,6 +106,13 @@ async fn cli_management_subcommands() {
     assert_eq!(out.status.code(), Some(0));
     let h: serde_json::Value = serde_json::from_str(stdout(&out).lines().next().unwrap()).unwrap();
     assert_eq!(h["vehicle_id"], "cli-1");
+    // The heading's health rides along (the smoke flight's compass-less fixed wing: course or
+    // not yet known; no compass).
+    assert_eq!(h["magnetometer"], "off", "{h}");
+    assert!(
+        ["course", "unknown", "yaw_bank"].contains(&h["heading_source"].as_str().unwrap()),
+        "{h}"
+    );
     let out = run_async(vec![
         "health".into(),
         "--from".into(),

@@ -46,9 +46,11 @@ pub struct Args {
 
 fn header() -> String {
     format!(
-        "{:<20} {:<18} {:>7} {:>6} {:>6} {:>9} {:>9} {:>8} {:>6} {:>6} {:>7}",
+        "{:<20} {:<18} {:<8} {:<7} {:>7} {:>6} {:>6} {:>9} {:>9} {:>8} {:>6} {:>6} {:>7}",
         "vehicle_id",
         "mode",
+        "heading",
+        "compass",
         "imu_hz",
         "gnss_hz",
         "cam_hz",
@@ -65,9 +67,13 @@ fn line(h: &pb::VehicleHealth, json: bool) -> String {
     let r = h.input_rates.unwrap_or_default();
     let l = h.latency.unwrap_or_default();
     let c = h.counters.unwrap_or_default();
+    let hd = h.heading.unwrap_or_default();
+    let (heading, compass) = (heading_name(hd.source), magnetometer_name(hd.magnetometer));
     if json {
         return serde_json::json!({
             "vehicle_id": h.vehicle_id, "mode": mode_name(h.mode), "t_ns": h.t_ns, "wall_ns": h.wall_ns,
+            "heading_source": heading, "magnetometer": compass,
+            "magnetometer_disturbed": hd.magnetometer_disturbed, "yaw_resets": hd.yaw_resets,
             "imu_hz": r.imu_hz, "gnss_hz": r.gnss_hz, "camera_hz": r.camera_hz,
             "latency_p50_s": l.p50_s, "latency_p99_s": l.p99_s, "latency_max_s": l.max_s,
             "accepted": c.accepted, "rejected": c.rejected, "late": c.late, "shed": c.shed, "dropped": c.dropped,
@@ -76,9 +82,11 @@ fn line(h: &pb::VehicleHealth, json: bool) -> String {
         .to_string();
     }
     format!(
-        "{:<20} {:<18} {:>7.1} {:>6.1} {:>6.1} {:>9.2} {:>9} {:>8} {:>6} {:>6} {:>7}",
+        "{:<20} {:<18} {:<8} {:<7} {:>7.1} {:>6.1} {:>6.1} {:>9.2} {:>9} {:>8} {:>6} {:>6} {:>7}",
         h.vehicle_id,
         mode_name(h.mode),
+        heading,
+        compass,
         r.imu_hz,
         r.gnss_hz,
         r.camera_hz,
@@ -89,6 +97,30 @@ fn line(h: &pb::VehicleHealth, json: bool) -> String {
         c.shed,
         c.dropped
     )
+}
+
+/// `VehicleHealth.heading.source` in a word.
+fn heading_name(s: i32) -> &'static str {
+    use uavnav_client::pb::HeadingSource as H;
+    match H::try_from(s).unwrap_or(H::Unspecified) {
+        H::Unspecified => "-",
+        H::Unknown => "unknown",
+        H::Magnetometer => "compass",
+        H::YawEstimator => "yaw_bank",
+        H::Course => "course",
+    }
+}
+
+/// `VehicleHealth.heading.magnetometer` in a word.
+fn magnetometer_name(s: i32) -> &'static str {
+    use uavnav_client::pb::MagnetometerState as M;
+    match M::try_from(s).unwrap_or(M::Unspecified) {
+        M::Unspecified => "-",
+        M::Off => "off",
+        M::Active => "active",
+        M::StoppedDead => "dead",
+        M::StoppedContradicted => "stopped",
+    }
 }
 
 /// Runs the command.
