@@ -11,6 +11,7 @@ use uavnav_estimator::eskf::HeadingSource;
 use uavnav_estimator::health::MagStatus;
 use uavnav_estimator::paper::heading::BankState;
 use uavnav_estimator::{Estimator, EstimatorParams, PoseOutput};
+use uavnav_sim::scenario::{MagDisturbanceSpec, WindowSpec};
 use uavnav_sim::{Flight, Scenario};
 
 fn flight(heading_deg: f64, with_mag: bool) -> Flight {
@@ -368,6 +369,9 @@ fn attitude_nees(f: &Flight, poses: &[PoseOutput]) -> (f64, f64) {
     (sum / n, within as f64 / n)
 }
 
+/// A disturbed-field window: start and end, s, and the field added in the body axes, T.
+type Disturbance = (f64, f64, [f64; 3]);
+
 /// Magnetometer disturbances on the simulated multirotor, in the body axes, as motor currents
 /// or a steel structure passed over make them (the compass reads 0.7 of the model strength, as
 /// the scenario says: its horizontal component is about 17 µT there). A gross one (strength
@@ -376,9 +380,6 @@ fn attitude_nees(f: &Flight, poses: &[PoseOutput]) -> (f64, f64) {
 /// the heading, and the attitude must stay consistent through both (mean NEES, yaw within
 /// 3σ). The disturbances fall in the forward and sideways legs (12–20 s), and a second gross
 /// one in the dash (36–40 s), where the GNSS velocity sees the heading too.
-/// A disturbed-field window: start and end, s, and the field added in the body axes, T.
-type Disturbance = (f64, f64, [f64; 3]);
-
 #[test]
 fn a_disturbed_compass_leaves_the_attitude_consistent() {
     let cases: [(&str, Vec<Disturbance>); 5] = [
@@ -399,22 +400,13 @@ fn a_disturbed_compass_leaves_the_attitude_consistent() {
     ];
     for (label, windows) in cases {
         let mut s = multirotor_scenario();
-        let mag = s.mag.as_mut().unwrap();
-        let toml: String = windows
+        s.mag.as_mut().unwrap().disturbances = windows
             .iter()
-            .map(|(a, b, d)| {
-                format!(
-                    "{{ start_s = {a}, end_s = {b}, field_body_t = [{}, {}, {}] }}",
-                    d[0], d[1], d[2]
-                )
+            .map(|&(start_s, end_s, field_body_t)| MagDisturbanceSpec {
+                window: WindowSpec { start_s, end_s },
+                field_body_t,
             })
-            .collect::<Vec<_>>()
-            .join(", ");
-        let parsed = Scenario::from_toml_str(
-            &multirotor_toml().replace("disturbances = []", &format!("disturbances = [{toml}]")),
-        )
-        .unwrap();
-        mag.disturbances = parsed.mag.unwrap().disturbances;
+            .collect();
         let f = Flight::new(&s).unwrap();
         let config = f.vehicle_config();
         let mut est = Estimator::new(&config, EstimatorParams::default(), Some(f.origin()));

@@ -23,7 +23,7 @@
 //!   uncertainty for [`CONTRADICTION_NS`] in a row, or, while the bank can tell the heading
 //!   (its honest σ, [`YawEstimator::honest_sigma_rad`], below `converged_sigma_rad`: a hover
 //!   cannot) without counting as converged (a long turn), by more than
-//!   [`GROSS_CONTRADICTION_RAD`] for [`GROSS_CONTRADICTION_NS`]: the yaw is set to the bank's
+//!   [`GROSS_CONTRADICTION_RAD`] for as long: the yaw is set to the bank's
 //!   again, counted in the health's `yaw_resets`;
 //! - back to **starting** with the filters at a restart (the divergence check), and at the end
 //!   of a GNSS outage that lost the heading ([`BankHeading::restart_search`], from
@@ -50,19 +50,18 @@ pub const MIN_HANDOVER_SIGMA_RAD: f64 = 0.087; // 5°
 /// (see `at_fix`) that resets the filter's heading, rad: beyond what the bank's fix-to-fix noise
 /// and the filter's drift between resets explain (the compass-contradiction bound of `eskf`).
 pub const GROSS_CONTRADICTION_RAD: f64 = 0.79; // 45°
-/// ... and for how long it must last, ns.
-pub const GROSS_CONTRADICTION_NS: i64 = 5_000_000_000;
 
-/// How long a converged bank must contradict the filter beyond 3σ before the filter's heading is
-/// reset to it, ns. Nothing else in this profile sees a multirotor's heading (its GPS-IMU filter's
-/// velocity test ratio stays near 0 with the heading 60° off), so the bank's word is not checked
-/// against the filter's own innovations as `eskf` checks it (`yaw_reset_timeout_ns` of GNSS
-/// velocity rejected). A bank can converge, briefly and confidently, on a wrong hypothesis while
+/// How long a contradiction must last before the filter's heading is reset to the bank, ns: a
+/// converged bank's beyond 3σ, or a gross one from a bank that can tell the heading without
+/// counting as converged. Nothing else in this profile sees a multirotor's heading (its GPS-IMU
+/// filter's velocity test ratio stays near 0 with the heading 60° off), so the bank's word is
+/// not checked against the filter's own innovations as `eskf` checks it (`yaw_reset_timeout_ns`
+/// of GNSS velocity rejected). A bank can converge, briefly and confidently, on a wrong hypothesis while
 /// the vehicle takes off: on copter_218 it left a right hand-over for a heading 57° off at σ 6°
 /// for 3.5 s, and with a 1 s wait the filter followed it and stayed 60–65° off for 30 s (yaw
-/// RMSE 23.5° against the autopilot's, 14.7° with this wait). The same 5 s as a gross
-/// contradiction.
-pub const CONTRADICTION_NS: i64 = GROSS_CONTRADICTION_NS;
+/// RMSE 23.5° against the autopilot's, 14.7° with this wait). The gross contradiction had this
+/// wait already.
+pub const CONTRADICTION_NS: i64 = 5_000_000_000;
 
 /// Where the heading source stands.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -183,7 +182,7 @@ impl BankHeading {
         // its heading still, so the bank never counts as converged there while it can tell the
         // heading (its honest σ small): a fixed wing of unknown airframe circling for minutes
         // drifted 50–120° from the bank, with σ 4–8°. Then only a gross contradiction resets,
-        // [`GROSS_CONTRADICTION_RAD`] for [`GROSS_CONTRADICTION_NS`]: resetting on every 3σ
+        // [`GROSS_CONTRADICTION_RAD`] for as long: resetting on every 3σ
         // disagreement with an unsteady bank took a 10 Hz-IMU plane's roll and pitch from 5° to
         // 8–14° of RMSE.
         let converged = self.bank.converged_yaw();
@@ -194,20 +193,17 @@ impl BankHeading {
         let d = uavnav_core::rotation::wrap_pi(att.euler.z - yaw);
         let s = (att.p[(2, 2)].max(0.0) + sigma * sigma).sqrt();
         self.test_ratio = d.abs() / (3.0 * s).max(1e-9);
-        let (bound, timeout_ns) = if converged.is_some() {
-            (3.0 * s, CONTRADICTION_NS)
+        let bound = if converged.is_some() {
+            3.0 * s
         } else {
-            (
-                (3.0 * s).max(GROSS_CONTRADICTION_RAD),
-                GROSS_CONTRADICTION_NS,
-            )
+            (3.0 * s).max(GROSS_CONTRADICTION_RAD)
         };
         if d.abs() <= bound {
             self.contradicted_since_ns = None;
             return;
         }
         let since = *self.contradicted_since_ns.get_or_insert(t_ns);
-        if t_ns - since >= timeout_ns {
+        if t_ns - since >= CONTRADICTION_NS {
             att.set_yaw(yaw, sigma.max(MIN_HANDOVER_SIGMA_RAD));
             self.resets += 1;
             self.contradicted_since_ns = None;
