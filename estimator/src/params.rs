@@ -172,6 +172,9 @@ pub struct EstimatorParams {
     /// a row stops the compass for the flight and resets the heading to the bank, ns. Long
     /// against a manoeuvre (a few seconds), short against a flight.
     pub mag_contradiction_timeout_ns: i64,
+    /// `eskf`: the in-flight compass calibration (hard-iron offset and the compass's own field,
+    /// eq. M2, `aid_sources::mag_calibration`).
+    pub mag_calibration: crate::aid_sources::mag_calibration::MagCalibrationParams,
 
     /// Heading-course alignment: use the GNSS course as the heading when the yaw estimator has not
     /// converged and the vehicle moves faster than `init_min_speed_mps`. Only right for a vehicle
@@ -278,6 +281,7 @@ impl Default for EstimatorParams {
             mag_heading_sigma_rad: 0.2,
             mag_max_inclination_error_rad: 10f64.to_radians(),
             mag_contradiction_timeout_ns: 10_000_000_000,
+            mag_calibration: Default::default(),
 
             course_heading: false,
             learn_gnss_delay: true,

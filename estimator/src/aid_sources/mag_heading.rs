@@ -261,6 +261,12 @@ impl MagHeadingSource {
         (d - max_incl_err_rad).max(0.0)
     }
 
+    /// Forgets the typical strength and inclination: the samples behind them were read through
+    /// a compass offset that is now subtracted (`mag_calibration`).
+    pub fn relearn_typical(&mut self) {
+        self.learnt = 0;
+    }
+
     /// The compass's typical strength learnt so far, T (0 before the first usable sample).
     pub fn typical_strength_t(&self) -> f64 {
         self.typical_t

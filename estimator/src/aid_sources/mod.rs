@@ -7,6 +7,7 @@
 //! | [`gnss_consistency`] | not a measurement: the receiver's velocities against its positions (eq. V1), which sets how far its velocities are trusted |
 //! | [`gnss_pos`] | antenna position through the lever arm (paper eq. 32) + Gauss–Markov error |
 //! | [`gnss_vel`] | antenna velocity with the `C(ω×r)` term (paper eq. 33) |
+//! | [`mag_calibration`] | not fused into the filter: the compass's hard-iron offset and its own field from the 3-axis field and the tilt (eq. M2), applied by `mag_heading` |
 //! | [`mag_heading`] | magnetometer heading against the WMM2025 declination (eq. M1) |
 //! | [`position_hold`] | not a sensor: the hold point that bounds a filter without position aiding (eq. H1) |
 //! | [`vision`] | relative rotation and direction of travel / metric translation between frames |
@@ -15,6 +16,7 @@ pub mod baro_height;
 pub mod gnss_consistency;
 pub mod gnss_pos;
 pub mod gnss_vel;
+pub mod mag_calibration;
 pub mod mag_heading;
 pub mod position_hold;
 pub mod vision;

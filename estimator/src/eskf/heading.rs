@@ -7,7 +7,7 @@ use uavnav_core::magnetic::{MagneticField, MagneticModel, decimal_year};
 
 use super::Eskf;
 use crate::aid_sources::gnss_pos::GnssMeas;
-use crate::aid_sources::mag_heading::{MagState, heading_from_field};
+use crate::aid_sources::mag_heading::{DEAD_FIELD_T, MagState, heading_from_field};
 use crate::init::{set_yaw, yaw_from_course};
 use crate::state::{ITH, IV, set_uncorrelated};
 
@@ -330,7 +330,36 @@ impl Eskf {
         self.mag_field
     }
 
-    pub(super) fn fuse_mag(&mut self, t_ns: i64, m_b: &Vector3<f64>) {
+    /// Feeds the compass calibration (eq. M2) with the raw sample and returns the sample with the
+    /// learnt offset removed once it is applied, and the heading σ the offset's remaining
+    /// uncertainty adds, rad (`∂α/∂b = −gᵀ C` with `g` the azimuth's gradient, eq. M1).
+    fn calibrated_mag(&mut self, t_ns: i64, m_b: &Vector3<f64>) -> (Vector3<f64>, f64) {
+        let Some(x) = self.x else {
+            return (*m_b, 0.0);
+        };
+        if self.mag.state == MagState::Stopped || m_b.norm() < DEAD_FIELD_T {
+            return (*m_b, 0.0);
+        }
+        let c = x.q.to_rotation_matrix().into_inner();
+        let p_th = self.p.fixed_view::<3, 3>(ITH, ITH).into_owned();
+        if self.mag_cal.update(t_ns, m_b, &c, &p_th, -x.p.z) {
+            // The compass's typical field was learnt through the offset now removed.
+            self.mag.relearn_typical();
+        }
+        let Some((b, p_b)) = self.mag_cal.applied() else {
+            return (*m_b, 0.0);
+        };
+        let m = m_b - b;
+        let m_n = c * m;
+        let h2 = (m_n.x * m_n.x + m_n.y * m_n.y).max(1e-30);
+        let g = Vector3::new(-m_n.y, m_n.x, 0.0) / h2;
+        let j = g.transpose() * c;
+        (m, (j * p_b * j.transpose())[(0, 0)].max(0.0).sqrt())
+    }
+
+    pub(super) fn fuse_mag(&mut self, t_ns: i64, m_b_raw: &Vector3<f64>) {
+        let (m_b, cal_sigma) = self.calibrated_mag(t_ns, m_b_raw);
+        let m_b = &m_b;
         let field = if self.frame_provisional {
             self.own_field(m_b)
         } else {
@@ -340,10 +369,15 @@ impl Eskf {
             return;
         };
         let Some(x) = self.x else { return };
-        let sigma = self.params.mag_heading_sigma_rad.hypot(extra).hypot(
-            self.mag
-                .static_sigma_rad(&field, self.params.mag_max_inclination_error_rad),
-        );
+        let sigma = self
+            .params
+            .mag_heading_sigma_rad
+            .hypot(extra)
+            .hypot(cal_sigma)
+            .hypot(
+                self.mag
+                    .static_sigma_rad(&field, self.params.mag_max_inclination_error_rad),
+            );
         if !self.yaw_aligned {
             if !self.mag.check_alive(m_b)
                 || !self

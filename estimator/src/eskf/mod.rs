@@ -29,6 +29,7 @@ use crate::aid_sources::gnss_pos::{
     GnssMeas, GnssPosSource, correlated_sigma, gm_psd, white_noise,
 };
 use crate::aid_sources::gnss_vel::{GnssVelSource, LEVER_GYRO_HALF_WINDOW_NS, lever_gyro};
+use crate::aid_sources::mag_calibration::MagCalibration;
 use crate::aid_sources::mag_heading::MagHeadingSource;
 use crate::aid_sources::position_hold::PositionHold;
 use crate::aid_sources::vision::{PlaneScale, VisionSource, VisionUse};
@@ -91,6 +92,8 @@ pub struct Eskf {
     gnss_vel: GnssVelSource,
     body_from_mag: Option<UnitQuaternion<f64>>,
     mag: MagHeadingSource,
+    /// The compass's offset and own field, learnt in flight (eq. M2).
+    mag_cal: MagCalibration,
     /// The model field at the origin and the data's date, and the extra declination σ (rad) for
     /// a date outside the model's validity or unknown.
     mag_field: Option<(MagneticField, f64)>,
@@ -234,6 +237,7 @@ impl Eskf {
             gnss_vel: GnssVelSource::default(),
             body_from_mag: config.mag.map(|m| m.body_from_mag),
             mag: MagHeadingSource::default(),
+            mag_cal: MagCalibration::new(params.mag_calibration),
             mag_field: None,
             yaw_est: YawEstimator::new(params.yaw_estimator),
             baro_sigma_pa: config.baro.map(|b| b.sigma_pressure_pa),
@@ -284,6 +288,11 @@ impl Eskf {
     /// The magnetometer heading source (state, diagnostics).
     pub fn mag_source(&self) -> &MagHeadingSource {
         &self.mag
+    }
+
+    /// The in-flight compass calibration (offset, field, diagnostics).
+    pub fn mag_calibration(&self) -> &MagCalibration {
+        &self.mag_cal
     }
 
     /// The yaw estimator (diagnostics).
