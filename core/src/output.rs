@@ -80,8 +80,22 @@ pub enum MagStatus {
     StoppedContradicted,
 }
 
+/// The in-flight compass calibration (`eskf`; eq. M2 of `uavnav_estimator::aid_sources::
+/// mag_calibration`) as health reports it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum MagCalibrationStatus {
+    /// Not started: no compass, not yet in flight (3 m above the lowest height), or the tilt is
+    /// not known yet.
+    #[default]
+    Off,
+    /// Learning the compass's offset; the compass is used as it reads.
+    Learning,
+    /// The learnt offset is subtracted from every compass sample.
+    Applied,
+}
+
 /// Where the heading comes from, and the compass's state: what a user needs to trust the yaw.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct HeadingHealth {
     /// The heading's source now (`Unknown` until one aligns it).
     pub source: HeadingSource,
@@ -90,6 +104,14 @@ pub struct HeadingHealth {
     /// Compass samples judged disturbed (strength or inclination off the model's or the
     /// compass's own typical), never fused.
     pub mag_disturbed: u64,
+    /// The in-flight compass calibration's state.
+    pub mag_calibration: MagCalibrationStatus,
+    /// The compass offset it has learnt, body axes, T (zero while off; subtracted from the
+    /// compass only once applied).
+    pub mag_offset_t: [f64; 3],
+    /// Its last test ratio (NIS over the gate; above 1 the sample was rejected), computed for
+    /// every sample it sees.
+    pub mag_calibration_test_ratio: f64,
 }
 
 /// What the filter is currently running on.

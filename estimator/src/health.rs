@@ -4,7 +4,7 @@
 //! `uavnav_core::output` with [`Mode`], as are the conversions from the snapshot here).
 
 pub use uavnav_core::output::{
-    HeadingHealth, HeadingSource, MagStatus, Mode, PoseHealth, SourceSummary,
+    HeadingHealth, HeadingSource, MagCalibrationStatus, MagStatus, Mode, PoseHealth, SourceSummary,
 };
 
 use crate::aid_sources::InnovDiag;

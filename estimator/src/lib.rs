@@ -13,7 +13,7 @@
 //! | [`eskf`] | the error-state EKF orchestration (horizon stepping, events, outputs) |
 //! | [`state`] | nominal state, error-state layout, injection, stochastic clones |
 //! | [`prediction`] | strapdown mechanization (eqs. 29–31) and block-sparse covariance prediction |
-//! | [`aid_sources`] | GNSS position (eq. 32), GNSS velocity (eq. 33), magnetometer heading (eq. M1), vision; gated updates |
+//! | [`aid_sources`] | GNSS position (eq. 32), GNSS velocity (eq. 33), magnetometer heading (eq. M1) and in-flight compass calibration (eq. M2), vision; gated updates |
 //! | [`buffer`] | the delayed-measurement buffer |
 //! | [`gnss_delay`] | the GNSS velocity's own delay learnt from the data (eq. L1) |
 //! | [`output_predictor`] | a pose for every IMU sample from the delayed filter |

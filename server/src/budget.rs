@@ -235,6 +235,13 @@ mod tests {
             magnetometer: i32::MAX,
             magnetometer_disturbed: u64::MAX,
             yaw_resets: u32::MAX,
+            magnetometer_calibration: i32::MAX,
+            magnetometer_offset_t: Some(uavnav_proto::v1::Vector3 {
+                x: f64::MAX,
+                y: f64::MAX,
+                z: f64::MAX,
+            }),
+            magnetometer_calibration_test_ratio: f64::MAX,
         });
         h.gnss_velocity_delay_s = Some(f64::MAX);
         let held = std::mem::size_of_val(&h) + prost::Message::encoded_len(&h) + 64;

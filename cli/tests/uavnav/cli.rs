@@ -109,6 +109,8 @@ async fn cli_management_subcommands() {
     // The heading's health rides along (the smoke flight's compass-less fixed wing: course or
     // not yet known; no compass).
     assert_eq!(h["magnetometer"], "off", "{h}");
+    assert_eq!(h["magnetometer_calibration"], "off", "{h}");
+    assert!(h["magnetometer_offset_t"].is_null(), "{h}");
     assert!(
         ["course", "unknown", "yaw_bank"].contains(&h["heading_source"].as_str().unwrap()),
         "{h}"

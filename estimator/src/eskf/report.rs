@@ -6,8 +6,11 @@ use uavnav_core::MotionPrior;
 
 use super::Eskf;
 use crate::aid_sources::InnovDiag;
+use crate::aid_sources::mag_calibration::CalibrationState;
 use crate::aid_sources::mag_heading::{MagHeadingSource, MagState};
-use crate::health::{HeadingHealth, Health, MagStatus, Mode, PoseHealth, SourceSummary};
+use crate::health::{
+    HeadingHealth, Health, MagCalibrationStatus, MagStatus, Mode, PoseHealth, SourceSummary,
+};
 use crate::output::{AidingFlags, PoseOutput, euler_sigma_at};
 use crate::state::{IP, ITH, IV, N};
 
@@ -83,10 +86,18 @@ impl Eskf {
             MagState::Stopped if *contradicted => MagStatus::StoppedContradicted,
             MagState::Stopped => MagStatus::StoppedDead,
         };
+        let mag_calibration = match self.mag_cal.state {
+            CalibrationState::Off => MagCalibrationStatus::Off,
+            CalibrationState::Learning => MagCalibrationStatus::Learning,
+            CalibrationState::Applied => MagCalibrationStatus::Applied,
+        };
         HeadingHealth {
             source: self.heading,
             mag,
             mag_disturbed: *disturbed,
+            mag_calibration,
+            mag_offset_t: self.mag_cal.bias().0.into(),
+            mag_calibration_test_ratio: self.mag_cal.diag.test_ratio,
         }
     }
 

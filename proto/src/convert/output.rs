@@ -11,7 +11,7 @@
 //! service converts too.
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
-use uavnav_core::output::{HeadingHealth, HeadingSource, MagStatus};
+use uavnav_core::output::{HeadingHealth, HeadingSource, MagCalibrationStatus, MagStatus};
 use uavnav_core::{AidingFlags, Lla, Mode, PoseHealth, PoseOutput, SourceSummary};
 
 use super::geometry::{required_vector3, vector3};
@@ -36,6 +36,9 @@ pub fn heading_to_wire(h: &HeadingHealth, yaw_resets: u32) -> v1::HeadingStatus 
         source,
         mag,
         mag_disturbed,
+        mag_calibration,
+        mag_offset_t,
+        mag_calibration_test_ratio,
     } = *h;
     let source = match source {
         HeadingSource::Unknown => v1::HeadingSource::Unknown,
@@ -49,11 +52,21 @@ pub fn heading_to_wire(h: &HeadingHealth, yaw_resets: u32) -> v1::HeadingStatus 
         MagStatus::StoppedDead => v1::MagnetometerState::StoppedDead,
         MagStatus::StoppedContradicted => v1::MagnetometerState::StoppedContradicted,
     };
+    let calibration = match mag_calibration {
+        MagCalibrationStatus::Off => v1::MagnetometerCalibration::Off,
+        MagCalibrationStatus::Learning => v1::MagnetometerCalibration::Learning,
+        MagCalibrationStatus::Applied => v1::MagnetometerCalibration::Applied,
+    };
+    let [x, y, z] = mag_offset_t;
     v1::HeadingStatus {
         source: source as i32,
         magnetometer: mag as i32,
         magnetometer_disturbed: mag_disturbed,
         yaw_resets,
+        magnetometer_calibration: calibration as i32,
+        magnetometer_offset_t: (mag_calibration != MagCalibrationStatus::Off)
+            .then_some(v1::Vector3 { x, y, z }),
+        magnetometer_calibration_test_ratio: mag_calibration_test_ratio,
     }
 }
 

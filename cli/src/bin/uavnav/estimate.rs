@@ -316,6 +316,17 @@ pub fn run(args: Args) -> CliResult {
         mag_status_words(heading.mag),
         heading.mag_disturbed
     );
+    if heading.mag_calibration != uavnav_core::output::MagCalibrationStatus::Off {
+        let [x, y, z] = heading.mag_offset_t.map(|v| v * 1e6);
+        eprintln!(
+            "uavnav: compass offset learnt in flight: [{x:.2}, {y:.2}, {z:.2}] µT (body axes), {}",
+            if heading.mag_calibration == uavnav_core::output::MagCalibrationStatus::Applied {
+                "applied"
+            } else {
+                "not applied (too small or not yet known well enough)"
+            }
+        );
+    }
     if let Some(dir) = &args.report {
         let Some(comparison) = comparison else {
             return Err(CliError::input(anyhow::anyhow!(

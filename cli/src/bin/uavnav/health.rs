@@ -74,6 +74,9 @@ fn line(h: &pb::VehicleHealth, json: bool) -> String {
             "vehicle_id": h.vehicle_id, "mode": mode_name(h.mode), "t_ns": h.t_ns, "wall_ns": h.wall_ns,
             "heading_source": heading, "magnetometer": compass,
             "magnetometer_disturbed": hd.magnetometer_disturbed, "yaw_resets": hd.yaw_resets,
+            "magnetometer_calibration": calibration_name(hd.magnetometer_calibration),
+            "magnetometer_offset_t": hd.magnetometer_offset_t.map(|v| [v.x, v.y, v.z]),
+            "magnetometer_calibration_test_ratio": hd.magnetometer_calibration_test_ratio,
             "imu_hz": r.imu_hz, "gnss_hz": r.gnss_hz, "camera_hz": r.camera_hz,
             "latency_p50_s": l.p50_s, "latency_p99_s": l.p99_s, "latency_max_s": l.max_s,
             "accepted": c.accepted, "rejected": c.rejected, "late": c.late, "shed": c.shed, "dropped": c.dropped,
@@ -108,6 +111,17 @@ fn heading_name(s: i32) -> &'static str {
         H::Magnetometer => "compass",
         H::YawEstimator => "yaw_bank",
         H::Course => "course",
+    }
+}
+
+/// `VehicleHealth.heading.magnetometer_calibration` in a word.
+fn calibration_name(s: i32) -> &'static str {
+    use uavnav_client::pb::MagnetometerCalibration as C;
+    match C::try_from(s).unwrap_or(C::Unspecified) {
+        C::Unspecified => "-",
+        C::Off => "off",
+        C::Learning => "learning",
+        C::Applied => "applied",
     }
 }
 
