@@ -49,6 +49,14 @@ pub struct Health {
     /// IMU intervals with a clipped (saturated) accelerometer or gyro axis (`eskf`; handled by
     /// extra process noise).
     pub imu_clipped: u64,
+    /// The IMU noise the `eskf` measured over about the last second ([`crate::eskf::
+    /// IMU_NOISE_TAU_S`], from the change between consecutive samples), over the configured
+    /// noise density, as a σ ratio: gyro,
+    /// accelerometer. 1 is the datasheet; a multirotor's vibration shows as 3–20 (the shared
+    /// ArduPilot copters: 10–20), a 10 Hz log of a manoeuvring aircraft likewise. The filter's
+    /// process noise follows the larger of the two (`Eskf::observed_imu_noise`). `None` for
+    /// `paper` or before the first interval.
+    pub imu_noise_ratio: Option<[f64; 2]>,
     /// The GNSS velocity's delay in use, s (`eskf`: the configured one until eq. L1 learns
     /// another, `crate::gnss_delay`; `None` for `paper`, which uses the configured one).
     pub gnss_velocity_delay_s: Option<f64>,
@@ -77,6 +85,7 @@ impl Default for Health {
             vision_no_clone: 0,
             gnss_resets: 0,
             imu_clipped: 0,
+            imu_noise_ratio: None,
             gnss_velocity_delay_s: None,
             cov_diag: [0.0; crate::state::N],
         }

@@ -244,6 +244,10 @@ mod tests {
             magnetometer_calibration_test_ratio: f64::MAX,
         });
         h.gnss_velocity_delay_s = Some(f64::MAX);
+        h.imu_noise = Some(uavnav_proto::v1::ImuNoise {
+            gyro_ratio: f64::MAX,
+            accel_ratio: f64::MAX,
+        });
         let held = std::mem::size_of_val(&h) + prost::Message::encoded_len(&h) + 64;
         assert!(held as u64 <= HEALTH_REPORT_BYTES, "{held} bytes");
     }

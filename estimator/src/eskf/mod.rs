@@ -108,6 +108,9 @@ pub struct Eskf {
     pub yaw_resets: u32,
     /// IMU intervals with a clipped axis.
     imu_clipped: u64,
+    /// The IMU noise measured over about the last second over the configured, σ ratio (gyro,
+    /// accelerometer): vibration, or a logged IMU too slow for the motion.
+    imu_noise_ratio: Option<[f64; 2]>,
     /// Since when the magnetometer-held heading has contradicted the converged yaw bank.
     mag_contradicted_since_ns: Option<i64>,
     /// How far the compass-held heading and the converged yaw bank have recently disagreed
@@ -142,6 +145,9 @@ const MAX_IMU_BEHIND: usize = 128;
 
 /// 1-σ of the specific force a clipped accelerometer axis may have missed, m/s² (PX4 uses
 /// 4.9 m/s² of accelerometer noise for bad-accelerometer intervals; clipping is worse).
+/// Time constant of the IMU noise ratio reported in health (`Health::imu_noise_ratio`), s.
+pub const IMU_NOISE_TAU_S: f64 = 1.0;
+
 pub const CLIP_ACCEL_SIGMA_MPS2: f64 = 10.0;
 /// 1-σ of the rate a clipped gyro axis may have missed, rad/s.
 pub const CLIP_GYRO_SIGMA_RADPS: f64 = 1.0;
@@ -248,6 +254,7 @@ impl Eskf {
             mag_contradicted_since_ns: None,
             mag_bank_conflict: heading::CompassConflict::default(),
             imu_clipped: 0,
+            imu_noise_ratio: None,
             vision: VisionSource::default(),
             out: OutputPredictor::new(),
             late_dropped: 0,
@@ -556,6 +563,15 @@ impl Eskf {
             ..self.noise
         };
         self.gyro_psd_used = noise.gyro_psd;
+        // Reported over ~1 s: one 10 ms interval holds two sample differences.
+        let a = 1.0 - (-dt / IMU_NOISE_TAU_S).exp();
+        let [g0, a0] = self.imu_noise_ratio.map_or([1.0; 2], |r| r.map(|v| v * v));
+        let (g1, a1) = (
+            self.acc.gyro_var / dt / self.noise.gyro_psd,
+            self.acc.accel_var / dt / self.noise.accel_psd,
+        );
+        self.imu_noise_ratio = Some([(g0 + a * (g1 - g0)).sqrt(), (a0 + a * (a1 - a0)).sqrt()])
+            .filter(|r| r.iter().all(|v| v.is_finite()));
         ErrorDynamics::new(x, &mean, &self.w_ie, self.params.gnss_pos_tau_s).propagate(
             &mut self.p,
             dt,

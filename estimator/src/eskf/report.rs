@@ -67,6 +67,7 @@ impl Eskf {
             vision_no_clone: self.vision.no_clone,
             gnss_resets: self.gnss_pos.resets + self.gnss_vel.resets,
             imu_clipped: self.imu_clipped,
+            imu_noise_ratio: self.imu_noise_ratio,
             gnss_velocity_delay_s: Some(self.gnss_delay.diag().delay_s),
             cov_diag,
         }

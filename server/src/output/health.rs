@@ -114,6 +114,7 @@ impl HealthWindow {
             configured: shared.configured.load(std::sync::atomic::Ordering::Relaxed),
             gnss_velocity_delay_s: engine.gnss_velocity_delay_s,
             heading: engine.heading,
+            imu_noise: engine.imu_noise,
         };
         self.since = now;
         self.counts_at_start = counts;
@@ -135,8 +136,8 @@ pub struct HealthReport {
 }
 
 /// Whether `new` says nothing that `prev` did not: the same vehicle, mode, rates, latencies,
-/// test ratios, counters, vision quality, reorder depth, configuration, GNSS velocity delay and
-/// heading status;
+/// test ratios, counters, vision quality, reorder depth, configuration, GNSS velocity delay,
+/// heading status and IMU noise;
 /// only the stream time
 /// and the wall clock may differ.
 pub fn repeats(prev: &pb::VehicleHealth, new: &pb::VehicleHealth) -> bool {
@@ -155,6 +156,7 @@ pub fn repeats(prev: &pb::VehicleHealth, new: &pb::VehicleHealth) -> bool {
         configured,
         gnss_velocity_delay_s,
         heading,
+        imu_noise,
     } = new;
     *vehicle_id == prev.vehicle_id
         && *mode == prev.mode
@@ -167,6 +169,7 @@ pub fn repeats(prev: &pb::VehicleHealth, new: &pb::VehicleHealth) -> bool {
         && *configured == prev.configured
         && *gnss_velocity_delay_s == prev.gnss_velocity_delay_s
         && *heading == prev.heading
+        && *imu_noise == prev.imu_noise
 }
 
 /// p50 / p99 / max of the samples (all zero when empty).

@@ -53,6 +53,8 @@ pub struct EngineHealth {
     /// Where the heading comes from and the compass's state (None from an engine that cannot
     /// tell).
     pub heading: Option<pb::HeadingStatus>,
+    /// The IMU noise measured over the configured (None from an engine that does not measure it).
+    pub imu_noise: Option<pb::ImuNoise>,
 }
 
 /// CPU work for one camera frame, run on the vision pool; its result `V` goes back to the engine

@@ -146,6 +146,12 @@ impl Engine for RunnerEngine {
             imu_clipped: h.imu_clipped,
             gnss_velocity_delay_s: h.gnss_velocity_delay_s,
             heading: Some(heading_to_wire(&h.heading, h.yaw_resets)),
+            imu_noise: h
+                .imu_noise_ratio
+                .map(|[gyro_ratio, accel_ratio]| pb::ImuNoise {
+                    gyro_ratio,
+                    accel_ratio,
+                }),
         }
     }
 

@@ -259,7 +259,8 @@ async fn without_gnss(profile: pb::FilterProfile) {
 /// The heading's health rides in every vehicle health report: on a simulated flight with a
 /// compass the heading is the magnetometer's, the compass active and nothing disturbed; with
 /// the same compass reading all zeros (a dead sensor, as on a shared real copter) the compass
-/// is stopped for the flight and says so, and the heading is not the magnetometer's.
+/// is stopped for the flight and says so, and the heading is not the magnetometer's. The IMU's
+/// measured noise against its configuration rides along too.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_heading_source_and_the_compass_state_reach_health() {
     // The simulated multirotor: it hovers first, so the compass aligns the heading (the fixed
@@ -319,5 +320,19 @@ async fn the_heading_source_and_the_compass_state_reach_health() {
         "health says {:?}",
         heading("dead-compass")
     );
+    // The IMU's measured noise rides along: the simulated IMU is as noisy as its configuration.
+    let noise = server
+        .registry()
+        .get("compass")
+        .unwrap()
+        .shared
+        .latest_health
+        .borrow()
+        .as_ref()
+        .and_then(|r| r.imu_noise);
+    let noise = noise.expect("imu_noise in health");
+    for r in [noise.gyro_ratio, noise.accel_ratio] {
+        assert!((0.5..2.0).contains(&r), "{noise:?}");
+    }
     server.shutdown().await.unwrap();
 }

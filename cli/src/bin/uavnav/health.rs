@@ -77,6 +77,8 @@ fn line(h: &pb::VehicleHealth, json: bool) -> String {
             "magnetometer_calibration": calibration_name(hd.magnetometer_calibration),
             "magnetometer_offset_t": hd.magnetometer_offset_t.map(|v| [v.x, v.y, v.z]),
             "magnetometer_calibration_test_ratio": hd.magnetometer_calibration_test_ratio,
+            "imu_noise_gyro_ratio": h.imu_noise.map(|n| n.gyro_ratio),
+            "imu_noise_accel_ratio": h.imu_noise.map(|n| n.accel_ratio),
             "imu_hz": r.imu_hz, "gnss_hz": r.gnss_hz, "camera_hz": r.camera_hz,
             "latency_p50_s": l.p50_s, "latency_p99_s": l.p99_s, "latency_max_s": l.max_s,
             "accepted": c.accepted, "rejected": c.rejected, "late": c.late, "shed": c.shed, "dropped": c.dropped,
