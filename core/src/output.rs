@@ -88,7 +88,8 @@ pub enum MagCalibrationStatus {
     /// not known yet.
     #[default]
     Off,
-    /// Learning the compass's offset; the compass is used as it reads.
+    /// Learning the compass's offset; the compass is used as it reads (once the offset is
+    /// known, with its heading σ widened by the error the offset makes).
     Learning,
     /// The learnt offset is subtracted from every compass sample.
     Applied,

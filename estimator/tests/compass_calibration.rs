@@ -134,10 +134,16 @@ fn an_uncalibrated_compass_is_calibrated_in_flight() {
                 on.state,
                 on.offset_err_h_t * 1e6,
             );
-            assert_eq!(on.state, CalibrationState::Applied);
             assert!(on.offset_err_h_t < 1.5e-6, "{}", on.offset_err_h_t);
-            assert!(on.within >= 0.99, "{}", on.within);
-            assert!(on.max < 1.5f64.to_radians(), "{}", on.max.to_degrees());
+            assert!(on.within >= 0.95, "{}", on.within);
+            // An offset that turns the heading by more than 20° is always corrected; a smaller
+            // one may be left (`apply_min_heading_rad`, 15° at its lower 2σ bound) and then
+            // widens the compass's σ instead.
+            if f.mag_bias_t().xy().norm() > 6e-6 {
+                assert_eq!(on.state, CalibrationState::Applied);
+                assert!(on.within >= 0.99, "{}", on.within);
+                assert!(on.max < 1.5f64.to_radians(), "{}", on.max.to_degrees());
+            }
             sum_off += off.rms;
             sum_on += on.rms;
         }
@@ -147,19 +153,28 @@ fn an_uncalibrated_compass_is_calibrated_in_flight() {
         (sum_off / 12.0).to_degrees(),
         (sum_on / 12.0).to_degrees()
     );
-    assert!(sum_on < 0.7 * sum_off, "{sum_on} vs {sum_off}");
+    assert!(sum_on < 0.75 * sum_off, "{sum_on} vs {sum_off}");
 }
 
-/// A compass calibrated as well as the committed scenario's (0.5 µT per axis) keeps its readings:
-/// the offset learnt is below what is worth applying, and the poses are those without the
-/// calibration, bit for bit.
+/// A compass calibrated as well as the committed scenario's (0.5 µT per axis) is never corrected:
+/// the offset learnt is below what is worth applying, and only widens the compass's σ by the
+/// fraction of a degree it is worth.
 #[test]
 fn a_calibrated_compass_is_left_alone() {
     for seed in 1..=4 {
         let f = flight(5e-7, seed);
         let off = run(&f, false);
         let on = run(&f, true);
+        eprintln!(
+            "offset σ 0.5 µT, seed {seed}: hover yaw RMS / within 3σ {:.3}° / {:.1} % → {:.3}° / {:.1} %, {:?}",
+            off.rms.to_degrees(),
+            100.0 * off.within,
+            on.rms.to_degrees(),
+            100.0 * on.within,
+            on.state
+        );
         assert_eq!(on.state, CalibrationState::Learning, "seed {seed}");
-        assert!(on.poses == off.poses, "seed {seed}");
+        assert!(on.within >= 0.99, "seed {seed}: {}", on.within);
+        assert!(on.rms < off.rms + 0.05f64.to_radians(), "seed {seed}");
     }
 }

@@ -435,6 +435,9 @@ fn survey() {
     };
     // `UAVNAV_SURVEY_NO_GNSS`: GNSS withheld from every flight (attitude only).
     let gnss = std::env::var("UAVNAV_SURVEY_NO_GNSS").is_err();
+    // `UAVNAV_SURVEY_NO_MAG_CAL`: without the in-flight compass calibration (eq. M2), for A/B.
+    let mut params = EstimatorParams::default();
+    params.mag_calibration.enabled = std::env::var("UAVNAV_SURVEY_NO_MAG_CAL").is_err();
     let mut bad = Vec::new();
     for dir in dirs {
         let name = dir.file_name().unwrap().to_string_lossy().into_owned();
@@ -446,8 +449,7 @@ fn survey() {
                     continue;
                 }
                 let use_ = Use { gnss, ..use_ };
-                let (poses, health) =
-                    run_with_health(&f, profile, EstimatorParams::default(), use_);
+                let (poses, health) = run_with_health(&f, profile, params.clone(), use_);
                 let Some(first) = poses
                     .iter()
                     .find(|p| p.health.mode.has_position())
@@ -458,10 +460,14 @@ fn survey() {
                     continue;
                 };
                 let s = score(&f, &poses, first + 30 * S, i64::MAX);
+                let h = &health.heading;
                 eprintln!(
-                    "{name} {profile:?} mag={}: {s}, GNSS velocity delay {:?} s",
+                    "{name} {profile:?} mag={}: {s}, GNSS velocity delay {:?} s, compass \
+                     calibration {:?} offset {:.2?} µT",
                     use_.mag && !f.mag.is_empty(),
-                    health.gnss_velocity_delay_s
+                    health.gnss_velocity_delay_s,
+                    h.mag_calibration,
+                    h.mag_offset_t.map(|v| v * 1e6)
                 );
                 if s.bad_sigma_rows > 0 {
                     bad.push(format!("{name} {profile:?}"));

@@ -331,8 +331,9 @@ impl Eskf {
     }
 
     /// Feeds the compass calibration (eq. M2) with the raw sample and returns the sample with the
-    /// learnt offset removed once it is applied, and the heading σ the offset's remaining
-    /// uncertainty adds, rad (`∂α/∂b = −gᵀ C` with `g` the azimuth's gradient, eq. M1).
+    /// learnt offset removed once it is applied, and the heading σ the offset adds, rad: once
+    /// applied, its remaining uncertainty's (`∂α/∂b = −gᵀ C` with `g` the azimuth's gradient,
+    /// eq. M1); known but not applied, the heading error it would make.
     fn calibrated_mag(&mut self, t_ns: i64, m_b: &Vector3<f64>) -> (Vector3<f64>, f64) {
         let Some(x) = self.x else {
             return (*m_b, 0.0);
@@ -346,15 +347,24 @@ impl Eskf {
             // The compass's typical field was learnt through the offset now removed.
             self.mag.relearn_typical();
         }
-        let Some((b, p_b)) = self.mag_cal.applied() else {
-            return (*m_b, 0.0);
+        // The azimuth's gradient with respect to a body-frame offset: `∂α/∂b = −gᵀ C`.
+        let j_b = |m: &Vector3<f64>| {
+            let m_n = c * m;
+            let h2 = (m_n.x * m_n.x + m_n.y * m_n.y).max(1e-30);
+            -(Vector3::new(-m_n.y, m_n.x, 0.0) / h2).transpose() * c
         };
-        let m = m_b - b;
-        let m_n = c * m;
-        let h2 = (m_n.x * m_n.x + m_n.y * m_n.y).max(1e-30);
-        let g = Vector3::new(-m_n.y, m_n.x, 0.0) / h2;
-        let j = g.transpose() * c;
-        (m, (j * p_b * j.transpose())[(0, 0)].max(0.0).sqrt())
+        if let Some((b, p_b)) = self.mag_cal.applied() {
+            let m = m_b - b;
+            let j = j_b(&m);
+            return (m, (j * p_b * j.transpose())[(0, 0)].max(0.0).sqrt());
+        }
+        // Known but not worth correcting: the heading error it would make widens the σ, so a
+        // compass whose offset was judged too small to correct is not trusted beyond it.
+        let extra = self
+            .mag_cal
+            .unapplied()
+            .map_or(0.0, |b| (j_b(m_b) * b)[(0, 0)].abs());
+        (*m_b, extra)
     }
 
     pub(super) fn fuse_mag(&mut self, t_ns: i64, m_b_raw: &Vector3<f64>) {
