@@ -77,7 +77,6 @@ struct Run {
     within: f64,
     state: CalibrationState,
     offset_err_h_t: f64,
-    poses: Vec<PoseOutput>,
 }
 
 fn run(f: &Flight, calibrate: bool) -> Run {
@@ -105,7 +104,6 @@ fn run(f: &Flight, calibrate: bool) -> Run {
         within: within as f64 / n as f64,
         state: cal.state,
         offset_err_h_t: (b - f.mag_bias_t()).xy().norm(),
-        poses,
     }
 }
 
