@@ -220,6 +220,26 @@ fn bench(c: &mut Criterion) {
             BatchSize::SmallInput,
         )
     });
+    // The compass calibration (eq. M2), per compass sample it fuses (at most 5 Hz): a learning
+    // calibration, 10 m up, the sample 200 ms after the last.
+    let c_nb = x.q.to_rotation_matrix().into_inner();
+    let p_th = p0
+        .fixed_view::<3, 3>(uavnav_estimator::state::ITH, uavnav_estimator::state::ITH)
+        .into_owned();
+    let mut cal =
+        uavnav_estimator::aid_sources::mag_calibration::MagCalibration::new(Default::default());
+    cal.update(0, &m_b, &c_nb, &p_th, 0.0);
+    cal.update(1, &m_b, &c_nb, &p_th, 10.0);
+    c.bench_function("eskf_mag_calibration_update", |b| {
+        b.iter_batched(
+            || cal.clone(),
+            |mut cal| {
+                let applied = cal.update(200_000_001, &m_b, &c_nb, &p_th, 10.0);
+                std::hint::black_box((applied, cal))
+            },
+            BatchSize::SmallInput,
+        )
+    });
 }
 
 criterion_group!(benches, bench);
