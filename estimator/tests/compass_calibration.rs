@@ -6,10 +6,13 @@
 //! compass heading by up to 10–40° as the vehicle yaws.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
+mod common;
+
+use common::fly_all;
 use uavnav_core::rotation::wrap_pi;
 use uavnav_core::truth::truth_at;
 use uavnav_estimator::aid_sources::mag_calibration::CalibrationState;
-use uavnav_estimator::{Estimator, EstimatorParams, PoseOutput};
+use uavnav_estimator::{Estimator, EstimatorParams};
 use uavnav_sim::{Flight, Scenario};
 
 /// The hover after the committed flight: scored from here, s.
@@ -46,29 +49,6 @@ fn flight(bias_sigma_t: f64, seed: u64) -> Flight {
     Flight::new(&Scenario::from_toml_str(&text).unwrap()).unwrap()
 }
 
-fn fly(est: &mut Estimator, f: &Flight) -> Vec<PoseOutput> {
-    let (mut g, mut m, mut b) = (0, 0, 0);
-    let mut out = Vec::new();
-    for s in f.imu() {
-        while g < f.gnss().len() && f.gnss()[g].t_ns <= s.t_ns {
-            est.push_gnss(&f.gnss()[g]).unwrap();
-            g += 1;
-        }
-        while m < f.mag().len() && f.mag()[m].t_ns <= s.t_ns {
-            est.push_mag(&f.mag()[m]).unwrap();
-            m += 1;
-        }
-        while b < f.baro().len() && f.baro()[b].t_ns <= s.t_ns {
-            est.push_baro(&f.baro()[b]).unwrap();
-            b += 1;
-        }
-        if let Some(p) = est.push_imu(s).unwrap() {
-            out.push(p);
-        }
-    }
-    out
-}
-
 /// One run: yaw RMS and max error in the hover (rad), the share within 3σ there, the
 /// calibration's state and its horizontal offset error (T).
 struct Run {
@@ -83,7 +63,7 @@ fn run(f: &Flight, calibrate: bool) -> Run {
     let mut params = EstimatorParams::default();
     params.mag_calibration.enabled = calibrate;
     let mut est = Estimator::new(&f.vehicle_config(), params, Some(f.origin()));
-    let poses = fly(&mut est, f);
+    let poses = fly_all(&mut est, f);
     let from = f.scenario().t0_ns + (HOVER_FROM_S * 1e9) as i64;
     let (mut se, mut n, mut within, mut max) = (0.0, 0usize, 0usize, 0.0f64);
     for p in poses.iter().filter(|p| p.t_ns >= from) {

@@ -4,6 +4,9 @@
 //! reads about 10, and the filter stays consistent because its process noise follows it.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
+mod common;
+
+use common::fly_all;
 use uavnav_core::rotation::euler_error;
 use uavnav_core::truth::truth_at;
 use uavnav_estimator::{Estimator, EstimatorParams};
@@ -25,28 +28,17 @@ fn run(f: &Flight, scale: f64) -> ([f64; 2], f64) {
     config.imu.gyro_noise_density *= scale;
     config.imu.accel_noise_density *= scale;
     let mut est = Estimator::new(&config, EstimatorParams::default(), Some(f.origin()));
-    let (mut g, mut m) = (0, 0);
-    let (mut within, mut n) = (0usize, 0usize);
-    for s in f.imu() {
-        while g < f.gnss().len() && f.gnss()[g].t_ns <= s.t_ns {
-            est.push_gnss(&f.gnss()[g]).unwrap();
-            g += 1;
-        }
-        while m < f.mag().len() && f.mag()[m].t_ns <= s.t_ns {
-            est.push_mag(&f.mag()[m]).unwrap();
-            m += 1;
-        }
-        if let Some(p) = est.push_imu(s).unwrap() {
+    let poses = fly_all(&mut est, f);
+    let within = poses
+        .iter()
+        .filter(|p| {
             let t = truth_at(f.truth(), p.t_ns).unwrap();
             let e = euler_error(&p.nav_from_body, &t.nav_from_body);
-            n += 1;
-            if e.x.abs() <= 3.0 * p.sigma_att_rad.x && e.y.abs() <= 3.0 * p.sigma_att_rad.y {
-                within += 1;
-            }
-        }
-    }
+            e.x.abs() <= 3.0 * p.sigma_att_rad.x && e.y.abs() <= 3.0 * p.sigma_att_rad.y
+        })
+        .count();
     let ratio = est.health().imu_noise_ratio.unwrap();
-    (ratio, within as f64 / n as f64)
+    (ratio, within as f64 / poses.len() as f64)
 }
 
 #[test]

@@ -5,6 +5,9 @@
 //! the heading must be right from the start.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
+mod common;
+
+use common::fly_all;
 use uavnav_core::rotation::wrap_pi;
 use uavnav_core::truth::truth_at;
 use uavnav_estimator::eskf::HeadingSource;
@@ -50,33 +53,9 @@ fn run(f: &Flight) -> (Vec<PoseOutput>, HeadingSource) {
 /// [`run`] with the vehicle configuration given.
 fn run_with(f: &Flight, config: &uavnav_core::VehicleConfig) -> (Vec<PoseOutput>, HeadingSource) {
     let mut est = Estimator::new(config, EstimatorParams::default(), Some(f.origin()));
-    let out = fly(&mut est, f);
+    let out = fly_all(&mut est, f);
     let src = est.eskf().unwrap().heading_source();
     (out, src)
-}
-
-/// Feeds every sensor of the flight in time order; returns the poses.
-fn fly(est: &mut Estimator, f: &Flight) -> Vec<PoseOutput> {
-    let (mut g, mut m, mut b) = (0, 0, 0);
-    let mut out = Vec::new();
-    for s in f.imu() {
-        while g < f.gnss().len() && f.gnss()[g].t_ns <= s.t_ns {
-            est.push_gnss(&f.gnss()[g]).unwrap();
-            g += 1;
-        }
-        while m < f.mag().len() && f.mag()[m].t_ns <= s.t_ns {
-            est.push_mag(&f.mag()[m]).unwrap();
-            m += 1;
-        }
-        while b < f.baro().len() && f.baro()[b].t_ns <= s.t_ns {
-            est.push_baro(&f.baro()[b]).unwrap();
-            b += 1;
-        }
-        if let Some(p) = est.push_imu(s).unwrap() {
-            out.push(p);
-        }
-    }
-    out
 }
 
 /// (fraction of poses with |yaw error| ≤ 3σ, max |yaw error| after `after_s`, rad).
@@ -282,7 +261,7 @@ fn paper_profile_takes_a_multirotor_heading_from_the_yaw_bank() {
         config.profile = uavnav_core::FilterProfile::Paper;
         let run_paper = |params: EstimatorParams| {
             let mut est = Estimator::new(&config, params, Some(f.origin()));
-            let out = fly(&mut est, &f);
+            let out = fly_all(&mut est, &f);
             let source = est.paper().unwrap().heading_source();
             (out, (est.health().yaw_resets, source.state))
         };
@@ -410,7 +389,7 @@ fn a_disturbed_compass_leaves_the_attitude_consistent() {
         let f = Flight::new(&s).unwrap();
         let config = f.vehicle_config();
         let mut est = Estimator::new(&config, EstimatorParams::default(), Some(f.origin()));
-        let poses = fly(&mut est, &f);
+        let poses = fly_all(&mut est, &f);
         let eskf = est.eskf().unwrap();
         let disturbed = eskf.mag_source().disturbed;
         let diag = eskf.mag_source().diag;

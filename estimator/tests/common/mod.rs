@@ -193,6 +193,31 @@ pub fn run(flight: &Flight, cfg: &RunCfg) -> Vec<PoseOutput> {
     outs
 }
 
+/// Feeds every GNSS fix, compass and barometer sample of the flight in time order before the
+/// IMU sample they precede; returns the poses.
+pub fn fly_all(est: &mut Estimator, f: &Flight) -> Vec<PoseOutput> {
+    let (mut g, mut m, mut b) = (0, 0, 0);
+    let mut out = Vec::new();
+    for s in f.imu() {
+        while g < f.gnss().len() && f.gnss()[g].t_ns <= s.t_ns {
+            est.push_gnss(&f.gnss()[g]).unwrap();
+            g += 1;
+        }
+        while m < f.mag().len() && f.mag()[m].t_ns <= s.t_ns {
+            est.push_mag(&f.mag()[m]).unwrap();
+            m += 1;
+        }
+        while b < f.baro().len() && f.baro()[b].t_ns <= s.t_ns {
+            est.push_baro(&f.baro()[b]).unwrap();
+            b += 1;
+        }
+        if let Some(p) = est.push_imu(s).unwrap() {
+            out.push(p);
+        }
+    }
+    out
+}
+
 /// The GNSS outage windows of a scenario in ns.
 pub fn outages_ns(s: &Scenario) -> Vec<(i64, i64)> {
     s.gnss
