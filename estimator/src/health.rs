@@ -49,10 +49,9 @@ pub struct Health {
     /// IMU intervals with a clipped (saturated) accelerometer or gyro axis (`eskf`; handled by
     /// extra process noise).
     pub imu_clipped: u64,
-    /// The IMU noise the `eskf` measured over about the last second ([`crate::eskf::
-    /// IMU_NOISE_TAU_S`], from the change between consecutive samples), over the configured
-    /// noise density, as a σ ratio: gyro,
-    /// accelerometer. 1 is the datasheet; a multirotor's vibration shows as 3–20 (the shared
+    /// The IMU noise the `eskf` measured over about the last second (from the change between
+    /// consecutive samples; `eskf::imu_noise`), over the configured noise density, as a σ ratio:
+    /// gyro, accelerometer. 1 is the datasheet; a multirotor's vibration shows as 3–20 (the shared
     /// ArduPilot copters: 10–20), a 10 Hz log of a manoeuvring aircraft likewise. The filter's
     /// process noise follows the larger of the two (`Eskf::observed_imu_noise`). `None` for
     /// `paper` or before the first interval.

@@ -22,7 +22,7 @@ pub struct EstimatorParams {
     pub max_gyro_radps: f64,
     /// An accelerometer axis at or beyond this is clipped, m/s²: 15.5 g, just under the ±16 g
     /// range most autopilot IMUs use. A clipped sample understates the specific force by an
-    /// unknown amount, so its interval gets [`crate::eskf::CLIP_ACCEL_SIGMA_MPS2`] of extra
+    /// unknown amount, so its interval gets [`crate::eskf::imu_noise::CLIP_ACCEL_SIGMA_MPS2`] of extra
     /// process noise and is counted in [`crate::Health::imu_clipped`]. An axis that repeats the
     /// same reading above 2 g is clipped too, whatever the range.
     pub imu_accel_clip_mps2: f64,
