@@ -62,8 +62,10 @@ pub struct MagCalibrationParams {
     /// (a calibrated one is within 1 µT, which the prior covers as well).
     pub prior_bias_sigma_t: f64,
     /// 1-σ of one sample's error in each of the two residuals, T: the sensor's noise is far
-    /// below it; motor currents and vibration are what a sample carries (on the shared ArduPilot
-    /// copter the field's strength scatters by about 1 µT in a hover).
+    /// below it; motor currents and vibration are what a sample carries, and they are alike
+    /// from sample to sample. With 1 µT the shared copter's offset was known to 0.3 µT a minute
+    /// into its flight at 1.3 µT from where the rest of the flight put it; PX4 and ArduPilot
+    /// fuse their 3-axis compasses with 5 µT.
     pub sample_sigma_t: f64,
     /// Random walk of the offset, T/√s (temperature, a current that changes slowly): 10 nT/√s is
     /// 0.08 µT in a minute, 0.6 µT in an hour.
@@ -76,7 +78,7 @@ pub struct MagCalibrationParams {
     /// The calibration learns only this far above the lowest height the filter has been at
     /// since it started, m: on the ground the compass reads the steel and the cables of the
     /// ground and the hangar, and motors spinning up (on the shared copter an offset learnt
-    /// from its take-off was 4 µT off what the rest of its flight showed).
+    /// through its take-off was 3.5 µT off what the rest of its flight showed).
     pub learn_min_height_m: f64,
     /// The calibration learns only while the filter's roll and pitch σ are both below this, rad.
     pub max_tilt_sigma_rad: f64,
