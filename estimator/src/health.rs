@@ -51,10 +51,12 @@ pub struct Health {
     pub imu_clipped: u64,
     /// The IMU noise the `eskf` measured over about the last second (from the change between
     /// consecutive samples; `eskf::imu_noise`), over the configured noise density, as a σ ratio:
-    /// gyro, accelerometer. 1 is the datasheet; a multirotor's vibration shows as 3–20 (the shared
-    /// ArduPilot copters: 10–20), a 10 Hz log of a manoeuvring aircraft likewise. The filter's
-    /// process noise follows the larger of the two (`Eskf::observed_imu_noise`). `None` for
-    /// `paper` or before the first interval.
+    /// gyro, accelerometer. 1 is as configured: with datasheet densities a multirotor's
+    /// vibration shows as 3–20 (the shared ArduPilot copters vibrate 10–20× their datasheet;
+    /// their folders state in-flight densities instead, and read 0.3–2.6 as medians), and a
+    /// 10 Hz log of a manoeuvring aircraft likewise (the shared plane_E: gyro 9.4, accelerometer
+    /// 3.9). The filter's process noise follows the larger of the two
+    /// (`Eskf::observed_imu_noise`). `None` for `paper` or before the first interval.
     pub imu_noise_ratio: Option<[f64; 2]>,
     /// The GNSS velocity's delay in use, s (`eskf`: the configured one until eq. L1 learns
     /// another, `crate::gnss_delay`; `None` for `paper`, which uses the configured one).

@@ -186,6 +186,9 @@ fn estimate_a_real_log_with_a_report_against_the_autopilot_reference() {
         "{err}"
     );
     assert_eq!(out.status.code(), Some(0));
+    // The IMU's measured noise over the run: a 10 Hz log of a manoeuvring plane is far noisier
+    // than any IMU's datasheet says.
+    assert!(err.contains("IMU noise against its configuration"), "{err}");
     let rows = rows(&poses);
     assert!(rows.len() > 5000, "{} poses", rows.len());
     for r in &rows {

@@ -75,6 +75,9 @@ pub struct RunOutput {
     pub gnss_delay_s: Option<(f64, f64)>,
     /// Where the heading came from at the end, the compass's state, and the heading resets.
     pub heading: (uavnav_core::output::HeadingHealth, u32),
+    /// The IMU's measured noise over its configured (gyro, accelerometer σ ratios), sampled
+    /// once a second of sensor time (`eskf`; empty for `paper`).
+    pub imu_noise: Vec<[f64; 2]>,
 }
 
 /// Inputs the estimator accepted, per sensor.
@@ -170,6 +173,7 @@ pub fn run_dataset(
         ..RunOutput::default()
     };
     let mut fixes = Vec::new();
+    let mut next_noise_t_ns = i64::MIN;
     let fix_frame = ds.origin().map(LocalFrame::new);
     for ev in ds.events().map_err(CliError::input)? {
         let ev = ev.map_err(CliError::input)?;
@@ -203,6 +207,10 @@ pub fn run_dataset(
         match runner.push_inline(ev) {
             Ok(poses) => {
                 out.fed = fed;
+                if t_ns >= next_noise_t_ns {
+                    out.imu_noise.extend(runner.health().imu_noise_ratio);
+                    next_noise_t_ns = t_ns.saturating_add(1_000_000_000);
+                }
                 for p in poses {
                     sink(&p).map_err(CliError::runtime)?;
                     out.poses.push(p);
@@ -325,6 +333,19 @@ pub fn run(args: Args) -> CliResult {
             } else {
                 "not applied (too small or not yet known well enough)"
             }
+        );
+    }
+    if !out.imu_noise.is_empty() {
+        let [(g50, g95), (a50, a95)] = [0, 1].map(|k| {
+            let mut v: Vec<f64> = out.imu_noise.iter().map(|r| r[k]).collect();
+            v.sort_by(f64::total_cmp);
+            let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+            (at(0.5), at(0.95))
+        });
+        eprintln!(
+            "uavnav: IMU noise against its configuration (σ ratio, median / 95th percentile over \
+             the run, once a second): gyro {g50:.1} / {g95:.1}, accelerometer {a50:.1} / \
+             {a95:.1} (1 = as configured; the filter follows the larger)"
         );
     }
     if let Some(dir) = &args.report {
