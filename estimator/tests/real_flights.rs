@@ -406,6 +406,15 @@ fn trace() {
             e.nominal()
                 .map(|x| [x.ba.x, x.ba.y, x.ba.z].map(|b| (b * 1000.0).round() / 1000.0)),
         );
+        let cal = e.mag_calibration();
+        eprint!(
+            "cal {:?} b {:.1?} µT F {:.1?} µT fused {} rej {} ",
+            cal.state,
+            cal.bias().0.map(|v| v * 1e6).as_slice(),
+            [cal.field_t().0 * 1e6, cal.field_t().1 * 1e6],
+            cal.diag.fused,
+            cal.diag.rejected,
+        );
         eprint!(
             "B {:.0}mG typ {:.0}mG ",
             f.mag

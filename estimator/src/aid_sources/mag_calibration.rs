@@ -97,6 +97,17 @@ pub struct MagCalibrationParams {
     pub apply_min_heading_rad: f64,
     /// Samples that must have been fused before the offset is applied.
     pub min_fused: u64,
+    /// The learnt field's inclination must be within this of the world magnetic model's, rad,
+    /// for the offset to be acted on. A real compass's direction matches the model (copter_218:
+    /// 58.2° against 58.1°) while its strength does not; a hover that barely tilts cannot tell
+    /// the vertical offset from the vertical field, and the pair then drifts together to a
+    /// field of any inclination (on the public ArduPilot survey, −12° and 68° at a site whose model
+    /// gives about 58°, with offsets of 34 and 88 µT). 15°: the compass copters there learnt 57.9–61.0°, and
+    /// 71.3° on `14-11-2014/118`, whose compass sits 10° off its autopilot's heading.
+    pub plausible_inclination_rad: f64,
+    /// The learnt field's strength must be within these multiples of the model's (the shared
+    /// compasses read 0.6–0.8 of it; one surveyed copter 1.8).
+    pub plausible_strength_ratio: (f64, f64),
     /// Rejections in a row that restart the calibration.
     pub reset_after_rejections: u32,
 }
@@ -116,6 +127,8 @@ impl Default for MagCalibrationParams {
             apply_min_heading_rad: 15f64.to_radians(),
             min_fused: 50,
             reset_after_rejections: 25,
+            plausible_inclination_rad: 15f64.to_radians(),
+            plausible_strength_ratio: (0.25, 4.0),
         }
     }
 }
@@ -144,11 +157,18 @@ pub struct MagCalibration {
     pub state: CalibrationState,
     /// Diagnostics of the 2-dof residual (computed for every sample seen, fused or not).
     pub diag: InnovDiag,
-    /// Restarts after a run of rejections.
+    /// Restarts after a run of rejections or an implausible result ([`Self::plausible`]).
     pub resets: u32,
+    /// Restarts because what was learnt was not a compass ([`Self::plausible`]).
+    pub implausible_restarts: u32,
     s: SVector<f64, NS>,
     p: Cov5,
     last_t_ns: i64,
+    /// Samples fused since the last (re)start.
+    fused_since_start: u64,
+    /// The world magnetic model's inclination (rad) and strength (T) where the vehicle is, when
+    /// the filter knows where that is.
+    model: Option<(f64, f64)>,
     /// The lowest height the filter has given, m (`+∞` before the first sample).
     lowest_height_m: f64,
 }
@@ -184,9 +204,12 @@ impl MagCalibration {
             state: CalibrationState::Off,
             diag: InnovDiag::new(),
             resets: 0,
+            implausible_restarts: 0,
             s: SVector::zeros(),
             p: Cov5::zeros(),
             last_t_ns: i64::MIN,
+            fused_since_start: 0,
+            model: None,
             lowest_height_m: f64::INFINITY,
         }
     }
@@ -202,6 +225,37 @@ impl MagCalibration {
     /// The compass's own field: vertical and horizontal strength, T (zero while off).
     pub fn field_t(&self) -> (f64, f64) {
         (self.s[3], self.s[4])
+    }
+
+    /// Sets the world magnetic model's field where the vehicle is (`None` while the filter's
+    /// place is provisional): what [`Self::plausible`] checks the learnt field against.
+    pub fn set_model(&mut self, inclination_rad_strength_t: Option<(f64, f64)>) {
+        self.model = inclination_rad_strength_t;
+    }
+
+    /// Whether the learnt offset and field describe a compass in the Earth's field: an offset no
+    /// larger than the field it leaves and, with the model, no larger than the model's field,
+    /// and a field whose inclination and strength agree with the model's
+    /// ([`MagCalibrationParams::plausible_inclination_rad`],
+    /// [`MagCalibrationParams::plausible_strength_ratio`]). An offset beyond the Earth's field
+    /// is not something a compass that an autopilot calibrated keeps; such a result is the
+    /// vertical offset and field drifting together, and applying it would turn the heading
+    /// by anything.
+    pub fn plausible(&self) -> bool {
+        let prm = &self.params;
+        let b = self.s.fixed_rows::<3>(0).norm();
+        let (f_d, f_h) = (self.s[3], self.s[4]);
+        let f = f_d.hypot(f_h);
+        if f_h <= 0.0 || b > f {
+            return false;
+        }
+        let Some((inclination_rad, strength_t)) = self.model else {
+            return true;
+        };
+        let (lo, hi) = prm.plausible_strength_ratio;
+        (f_d.atan2(f_h) - inclination_rad).abs() <= prm.plausible_inclination_rad
+            && b <= strength_t
+            && (lo * strength_t..=hi * strength_t).contains(&f)
     }
 
     /// The offset to subtract from the compass and its covariance, once applied.
@@ -280,12 +334,20 @@ impl MagCalibration {
         d.fused += 1;
         d.consecutive_rejects = 0;
         d.last_fused_t_ns = t_ns;
+        self.fused_since_start += 1;
         let k = pht * s_inv;
         self.s += k * y;
         // Joseph form: the prior's 20 µT against 1 µT samples is a large first gain.
         let ikh = Cov5::identity() - k * h;
         self.p = ikh * self.p * ikh.transpose() + k * rm * k.transpose();
         self.p = (self.p + self.p.transpose()) * 0.5;
+        if self.fused_since_start >= prm.min_fused && !self.plausible() {
+            // Not a compass in the Earth's field: start again rather than act on it (the same
+            // data may lead there again; it is then never applied, and never widens the σ).
+            self.resets += 1;
+            self.implausible_restarts += 1;
+            return self.start(t_ns, m_b, c);
+        }
         let was = self.state;
         if self.state == CalibrationState::Learning && self.ready() {
             self.state = CalibrationState::Applied;
@@ -297,7 +359,7 @@ impl MagCalibration {
     /// that turns the heading by less than [`MagCalibrationParams::apply_heading_sigma_rad`].
     fn known(&self) -> bool {
         let f_h = self.s[4];
-        if self.diag.fused < self.params.min_fused || f_h <= 0.0 {
+        if self.fused_since_start < self.params.min_fused || f_h <= 0.0 || !self.plausible() {
             return false;
         }
         let pbh = self.p.fixed_view::<2, 2>(0, 0);
@@ -360,6 +422,7 @@ impl MagCalibration {
         self.p.fixed_view_mut::<2, 2>(3, 3).copy_from(&pff);
         self.state = CalibrationState::Learning;
         self.last_t_ns = t_ns;
+        self.fused_since_start = 0;
         self.diag.consecutive_rejects = 0;
         false
     }
@@ -497,6 +560,52 @@ mod tests {
             learnt.push(bh);
         }
         assert!((learnt[0] - learnt[1]).norm() < 1e-12, "{learnt:?}");
+    }
+
+    /// Feeds 300 samples of a swing with offset `b`; returns the calibration.
+    fn swung(b: Vector3<f64>, model: Option<(f64, f64)>) -> MagCalibration {
+        let p_th = Matrix3::identity() * 1f64.to_radians().powi(2);
+        let mut cal = MagCalibration::new(MagCalibrationParams::default());
+        cal.set_model(model);
+        for k in 0..300 {
+            let c = swing(k);
+            cal.update(k as i64 * S / 5, &reading(&c, &b, k), &c, &p_th, height(k));
+        }
+        cal
+    }
+
+    #[test]
+    fn only_a_compass_in_the_earths_field_is_corrected() {
+        let b = Vector3::new(8e-6, -6e-6, 3e-6);
+        let f = field();
+        let inclination = f.z.atan2(f.x);
+        // The model agrees in direction, not in strength (a compass reading 0.7 of it): applied.
+        let cal = swung(b, Some((inclination, f.norm() / 0.7)));
+        assert_eq!(cal.state, CalibrationState::Applied);
+        assert!(cal.plausible());
+        assert_eq!(cal.implausible_restarts, 0);
+        // A model 40° steeper than what the compass reads: never acted on, started again.
+        let cal = swung(b, Some((inclination + 40f64.to_radians(), f.norm())));
+        assert_eq!(cal.state, CalibrationState::Learning);
+        assert!(cal.applied().is_none() && cal.unapplied().is_none());
+        assert!(
+            cal.implausible_restarts >= 4,
+            "{}",
+            cal.implausible_restarts
+        );
+        // A strength 5× the model's: the same.
+        let cal = swung(b, Some((inclination, f.norm() / 5.0)));
+        assert!(cal.applied().is_none() && cal.unapplied().is_none());
+        assert!(cal.implausible_restarts > 0);
+        // Without a model, an offset larger than the field it leaves (47 µT against 32 µT) is
+        // not a compass's either, though the swing determines it.
+        let big = Vector3::new(30e-6, -30e-6, 20e-6);
+        let cal = swung(big, None);
+        assert!(cal.applied().is_none() && cal.unapplied().is_none());
+        assert!(cal.implausible_restarts > 0);
+        // …while a plausible one is learnt and applied without a model as before.
+        let cal = swung(b, None);
+        assert_eq!(cal.state, CalibrationState::Applied);
     }
 
     #[test]

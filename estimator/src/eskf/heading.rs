@@ -343,6 +343,13 @@ impl Eskf {
         }
         let c = x.q.to_rotation_matrix().into_inner();
         let p_th = self.p.fixed_view::<3, 3>(ITH, ITH).into_owned();
+        let model = if self.frame_provisional {
+            None
+        } else {
+            self.model_field(t_ns)
+                .map(|(f, _)| (f.inclination_rad(), f.strength_t()))
+        };
+        self.mag_cal.set_model(model);
         if self.mag_cal.update(t_ns, m_b, &c, &p_th, -x.p.z) {
             // The compass's typical field was learnt through the offset now removed.
             self.mag.relearn_typical();
