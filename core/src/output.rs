@@ -113,6 +113,9 @@ pub struct HeadingHealth {
     /// Its last test ratio (NIS over the gate; above 1 the sample was rejected), computed for
     /// every sample it sees.
     pub mag_calibration_test_ratio: f64,
+    /// Restarts of the calibration: after a run of rejections, or because what it learnt was
+    /// not a compass in the Earth's field (never acted on).
+    pub mag_calibration_restarts: u32,
 }
 
 /// What the filter is currently running on.

@@ -242,6 +242,7 @@ mod tests {
                 z: f64::MAX,
             }),
             magnetometer_calibration_test_ratio: f64::MAX,
+            magnetometer_calibration_restarts: u32::MAX,
         });
         h.gnss_velocity_delay_s = Some(f64::MAX);
         h.imu_noise = Some(uavnav_proto::v1::ImuNoise {

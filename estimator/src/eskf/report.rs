@@ -99,6 +99,7 @@ impl Eskf {
             mag_calibration,
             mag_offset_t: self.mag_cal.bias().0.into(),
             mag_calibration_test_ratio: self.mag_cal.diag.test_ratio,
+            mag_calibration_restarts: self.mag_cal.resets,
         }
     }
 

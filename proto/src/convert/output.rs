@@ -39,6 +39,7 @@ pub fn heading_to_wire(h: &HeadingHealth, yaw_resets: u32) -> v1::HeadingStatus 
         mag_calibration,
         mag_offset_t,
         mag_calibration_test_ratio,
+        mag_calibration_restarts,
     } = *h;
     let source = match source {
         HeadingSource::Unknown => v1::HeadingSource::Unknown,
@@ -67,6 +68,7 @@ pub fn heading_to_wire(h: &HeadingHealth, yaw_resets: u32) -> v1::HeadingStatus 
         magnetometer_offset_t: (mag_calibration != MagCalibrationStatus::Off)
             .then_some(v1::Vector3 { x, y, z }),
         magnetometer_calibration_test_ratio: mag_calibration_test_ratio,
+        magnetometer_calibration_restarts: mag_calibration_restarts,
     }
 }
 

@@ -327,12 +327,15 @@ pub fn run(args: Args) -> CliResult {
     if heading.mag_calibration != uavnav_core::output::MagCalibrationStatus::Off {
         let [x, y, z] = heading.mag_offset_t.map(|v| v * 1e6);
         eprintln!(
-            "uavnav: compass offset learnt in flight: [{x:.2}, {y:.2}, {z:.2}] µT (body axes), {}",
+            "uavnav: compass offset learnt in flight: [{x:.2}, {y:.2}, {z:.2}] µT (body axes), \
+             {}; {} restarts (a changed compass, or a result that was not a compass in the \
+             Earth's field)",
             if heading.mag_calibration == uavnav_core::output::MagCalibrationStatus::Applied {
                 "applied"
             } else {
-                "not applied (too small or not yet known well enough)"
-            }
+                "not applied (too small, not yet known well enough, or not plausible)"
+            },
+            heading.mag_calibration_restarts
         );
     }
     if !out.imu_noise.is_empty() {

@@ -77,6 +77,7 @@ fn line(h: &pb::VehicleHealth, json: bool) -> String {
             "magnetometer_calibration": calibration_name(hd.magnetometer_calibration),
             "magnetometer_offset_t": hd.magnetometer_offset_t.map(|v| [v.x, v.y, v.z]),
             "magnetometer_calibration_test_ratio": hd.magnetometer_calibration_test_ratio,
+            "magnetometer_calibration_restarts": hd.magnetometer_calibration_restarts,
             "imu_noise_gyro_ratio": h.imu_noise.map(|n| n.gyro_ratio),
             "imu_noise_accel_ratio": h.imu_noise.map(|n| n.accel_ratio),
             "imu_hz": r.imu_hz, "gnss_hz": r.gnss_hz, "camera_hz": r.camera_hz,
