@@ -43,6 +43,8 @@ pub struct Estimator {
     inputs_rejected: u64,
     /// Restarts after a non-finite state or covariance (kept across them).
     divergence_resets: u32,
+    /// IMU gaps bridged instead of restarting (kept across restarts).
+    imu_gaps_bridged: u64,
     /// Restarted after a divergence and no pose since: the mode is [`Mode::Diverged`].
     diverged: bool,
 }
@@ -97,6 +99,7 @@ impl Estimator {
             jump_run: None,
             inputs_rejected: 0,
             divergence_resets: 0,
+            imu_gaps_bridged: 0,
             diverged: false,
         }
     }
@@ -112,11 +115,18 @@ impl Estimator {
     /// Adds an IMU sample; returns the pose at its time once initialised.
     pub fn push_imu(&mut self, s: &ImuSample) -> Result<Option<PoseOutput>, InputError> {
         if let Err(e) = check_imu(s, self.last_imu_t_ns, &self.params) {
-            self.inputs_rejected += 1;
-            if matches!(e, InputError::TimeJump { .. }) && self.note_jump(s.t_ns) {
-                self.restart_after_gap();
+            if let InputError::TimeJump { gap_ns, .. } = e
+                && self.bridges(gap_ns)
+            {
+                // Integrated across, with the covariance widened (`Eskf::widen_for_gap`).
+                self.imu_gaps_bridged += 1;
             } else {
-                return Err(e);
+                self.inputs_rejected += 1;
+                if matches!(e, InputError::TimeJump { .. }) && self.note_jump(s.t_ns) {
+                    self.restart_after_gap();
+                } else {
+                    return Err(e);
+                }
             }
         }
         self.jump_run = None;
@@ -136,6 +146,15 @@ impl Estimator {
         self.diverged = false;
         o.health.inputs_rejected = self.inputs_rejected;
         Ok(Some(o))
+    }
+
+    /// Whether an IMU gap of `gap_ns` is bridged rather than refused: `eskf` with a state to
+    /// carry across, the gap within [`EstimatorParams::max_bridge_gap_ns`], and the stream not
+    /// already in a run of refused jumps.
+    fn bridges(&self, gap_ns: i64) -> bool {
+        gap_ns <= self.params.max_bridge_gap_ns
+            && self.jump_run.is_none()
+            && matches!(&self.profile, Profile::Eskf(e) if e.nominal().is_some())
     }
 
     fn covariance_finite(&self) -> bool {
@@ -163,10 +182,15 @@ impl Estimator {
     }
 
     fn restart_after_gap(&mut self) {
-        let (rejected, resets) = (self.inputs_rejected, self.divergence_resets);
+        let (rejected, resets, bridged) = (
+            self.inputs_rejected,
+            self.divergence_resets,
+            self.imu_gaps_bridged,
+        );
         self.reset();
         self.inputs_rejected = rejected;
         self.divergence_resets = resets;
+        self.imu_gaps_bridged = bridged;
     }
 
     /// Adds a GNSS fix, dated at its time of validity, its stamp less the configured GNSS delay.
@@ -265,6 +289,7 @@ impl Estimator {
         };
         h.inputs_rejected = self.inputs_rejected;
         h.divergence_resets = h.divergence_resets.saturating_add(self.divergence_resets);
+        h.imu_gaps_bridged = self.imu_gaps_bridged;
         if self.diverged {
             h.mode = crate::health::Mode::Diverged;
         }
@@ -301,6 +326,7 @@ impl Estimator {
         self.jump_run = None;
         self.inputs_rejected = 0;
         self.divergence_resets = 0;
+        self.imu_gaps_bridged = 0;
         self.diverged = false;
     }
 }

@@ -40,6 +40,9 @@ pub struct Health {
     pub divergence_resets: u32,
     /// Inputs refused by validation (NaN, time going backwards, …).
     pub inputs_rejected: u64,
+    /// IMU gaps longer than `EstimatorParams::max_imu_gap_ns` that the `eskf` bridged instead of
+    /// restarting (`EstimatorParams::max_bridge_gap_ns`).
+    pub imu_gaps_bridged: u64,
     /// Measurements that arrived behind the fusion horizon and were dropped.
     pub late_dropped: u64,
     /// Vision measurements dropped for lack of a clone at their frame-0 time.
@@ -82,6 +85,7 @@ impl Default for Health {
             heading: HeadingHealth::default(),
             divergence_resets: 0,
             inputs_rejected: 0,
+            imu_gaps_bridged: 0,
             late_dropped: 0,
             vision_no_clone: 0,
             gnss_resets: 0,

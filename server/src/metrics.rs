@@ -283,6 +283,8 @@ pub struct Metrics {
     pub divergence_resets: Counter,
     /// IMU samples the estimators found clipped (at the sensor's range), all vehicles.
     pub imu_clipped: Counter,
+    /// IMU gaps the estimators bridged instead of restarting.
+    pub imu_gaps_bridged: Counter,
     /// Authentication and authorization refusals, TLS handshake failures.
     pub security: crate::security::SecurityMetrics,
     /// Connections open, refused and closed, by listener.
@@ -467,6 +469,12 @@ impl Metrics {
             "IMU samples the estimators found clipped (at the sensor's range; fused with inflated noise)",
             imu_clipped.clone(),
         );
+        let imu_gaps_bridged = Counter::default();
+        registry.register(
+            "imu_gaps_bridged",
+            "IMU gaps of 0.5-5 s the estimators integrated across with a widened covariance instead of restarting",
+            imu_gaps_bridged.clone(),
+        );
         let admission_evictions = Counter::default();
         registry.register(
             "admission_evictions",
@@ -504,6 +512,7 @@ impl Metrics {
             frames_rejected,
             divergence_resets,
             imu_clipped,
+            imu_gaps_bridged,
             security,
             connections,
             arrivals,

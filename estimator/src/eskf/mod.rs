@@ -4,7 +4,7 @@
 //!
 //! | module | what it holds |
 //! |---|---|
-//! | this file | the filter's state, horizon stepping, buffered events, GNSS, baro and vision fusion |
+//! | this file | the filter's state, horizon stepping (and bridged IMU gaps, eq. G1), buffered events, GNSS, baro and vision fusion |
 //! | [`heading`] | the heading lifecycle ([`HeadingSource`]), magnetometer and yaw-bank alignment |
 //! | [`gnssless`] | the start without GNSS, attitude only until the first fix |
 //! | [`imu_noise`] | the IMU's noise measured from its samples, clipping, and their report in health |
@@ -44,7 +44,7 @@ use crate::params::EstimatorParams;
 use crate::prediction::{
     ErrorDynamics, GravityCache, ImuMean, ProcessNoise, earth_rate_ned, integrate_nominal,
 };
-use crate::state::{Cov, ErrVec, ITH, Nominal, PoseClone, augment_clone, clear_clone};
+use crate::state::{Cov, ErrVec, IP, ITH, IV, Nominal, PoseClone, augment_clone, clear_clone};
 use crate::yaw_estimator::YawEstimator;
 
 /// Covariance-prediction accumulator (PX4 downsampling of the covariance prediction).
@@ -110,6 +110,9 @@ pub struct Eskf {
     pub yaw_resets: u32,
     /// IMU intervals with a clipped axis.
     imu_clipped: u64,
+    /// An IMU gap was bridged and no fix has come since: the next one widens the position and
+    /// velocity to its innovation first (`widen_for_gap`).
+    gap_fix_pending: bool,
     /// The IMU noise measured over about the last second over the configured, σ ratio (gyro,
     /// accelerometer): vibration, or a logged IMU too slow for the motion.
     imu_noise_ratio: Option<[f64; 2]>,
@@ -228,6 +231,7 @@ impl Eskf {
             mag_contradicted_since_ns: None,
             mag_bank_conflict: heading::CompassConflict::default(),
             imu_clipped: 0,
+            gap_fix_pending: false,
             imu_noise_ratio: None,
             vision: VisionSource::default(),
             out: OutputPredictor::new(),
@@ -430,7 +434,14 @@ impl Eskf {
         }
         self.integrate_to(&a, &b, b.t_ns);
         let dt_s = (b.t_ns - a.t_ns) as f64 * 1e-9;
-        self.observed_imu_noise(&a, &b, dt_s);
+        let bridged = b.t_ns - a.t_ns > self.params.max_imu_gap_ns;
+        if bridged {
+            // A gap the estimator chose to bridge (`EstimatorParams::max_bridge_gap_ns`).
+            self.widen_for_gap(&a, &b, dt_s);
+        } else {
+            // Consecutive samples across a gap say nothing of the IMU's noise.
+            self.observed_imu_noise(&a, &b, dt_s);
+        }
         // Without GNSS the bank sees a zero bias, as it would had the filter waited for a fix
         // (`gnssless`: the start from the first fix is then the same).
         let bg = match self.x.as_ref() {
@@ -440,7 +451,9 @@ impl Eskf {
         let m = mean_of(&a, &b);
         self.yaw_est.predict(&(m.gyro - bg), &m.accel, dt_s);
         self.track_unaided_turn(&m.gyro, dt_s);
-        self.learn_delay_from_imu(&a, &b, &m.accel);
+        if !bridged {
+            self.learn_delay_from_imu(&a, &b, &m.accel);
+        }
         if let Some(done) = self.imu.pop_front() {
             // Kept for the lever-arm gyro window around a fix at the horizon.
             self.imu_behind.push_back(done);
@@ -492,6 +505,40 @@ impl Eskf {
         }
     }
 
+    /// After integrating across a bridged IMU gap of `gap_s` between the samples `a` and `b`:
+    /// the covariance takes the rotation and acceleration the gap did not show, and the output
+    /// predictor starts again from the filter. The interval was integrated with the mean of `a`
+    /// and `b`, as any interval is; what that misses is a rate or specific force that changed in
+    /// between, so the unseen rate's σ is the larger of
+    /// `EstimatorParams::bridge_rate_sigma_radps` and half the change from `a` to `b` (a vehicle
+    /// that was turning differently at each end of the gap did something the mean cannot say),
+    /// and the same for the specific force (`bridge_accel_sigma_mps2`). Eq. G1:
+    /// `σ_θ² += (T max(σ_ω, |ω_b − ω_a| / 2))²` (at most 30°), `σ_v² += (T σ_a)²`,
+    /// `σ_p² += (T² σ_a / 2)²`, each axis.
+    fn widen_for_gap(&mut self, a: &ImuSample, b: &ImuSample, gap_s: f64) {
+        if self.x.is_none() {
+            return;
+        }
+        self.flush_cov();
+        let prm = &self.params;
+        let rate = prm
+            .bridge_rate_sigma_radps
+            .max(0.5 * (b.gyro_radps - a.gyro_radps).norm());
+        let accel = prm
+            .bridge_accel_sigma_mps2
+            .max(0.5 * (b.accel_mps2 - a.accel_mps2).norm());
+        let att_var = (rate * gap_s).min(30f64.to_radians()).powi(2);
+        let vel_var = (accel * gap_s).powi(2);
+        let pos_var = (0.5 * accel * gap_s * gap_s).powi(2);
+        for i in 0..3 {
+            self.p[(ITH + i, ITH + i)] += att_var;
+            self.p[(IV + i, IV + i)] += vel_var;
+            self.p[(IP + i, IP + i)] += pos_var;
+        }
+        self.corrected = true;
+        self.gap_fix_pending = true;
+    }
+
     /// Propagates the covariance over the accumulated interval.
     fn flush_cov(&mut self) {
         let Some(x) = self.x.as_ref() else { return };
@@ -539,6 +586,13 @@ impl Eskf {
             && self.outage_hold()
         {
             self.end_outage_hold(m);
+        }
+        if let Event::Gnss(m) = &e
+            && std::mem::take(&mut self.gap_fix_pending)
+        {
+            // What the inertial prediction across the gap got wrong is the gap's, not evidence
+            // about the attitude: widened and decorrelated, as at the end of an outage.
+            self.widen_to_fix(m);
         }
         if self.x.is_none() {
             if let Event::Gnss(m) = e {

@@ -102,9 +102,16 @@ impl Eskf {
     /// The first fix after an outage's hold: ends the hold and frees the position and velocity
     /// for the fix to set (see the module doc).
     pub(super) fn end_outage_hold(&mut self, m: &GnssMeas) {
+        self.hold.stop();
+        self.widen_to_fix(m);
+    }
+
+    /// Widens the position and velocity to at least their innovation against the fix `m`,
+    /// decorrelated from the rest, and counts it as a reset of each source: the fix then
+    /// corrects them rather than the attitude or the biases.
+    pub(super) fn widen_to_fix(&mut self, m: &GnssMeas) {
         let Some(x) = self.x else { return };
         self.flush_cov();
-        self.hold.stop();
         widen(&mut self.p, IP, &(m.pos_ned_m - x.p).map(f64::abs));
         self.gnss_pos.resets += 1;
         if let Some(v) = m.vel_ned_mps {

@@ -63,6 +63,7 @@ impl Eskf {
             heading: self.heading_health(),
             divergence_resets: 0,
             inputs_rejected: 0,
+            imu_gaps_bridged: 0,
             late_dropped: self.late_dropped,
             vision_no_clone: self.vision.no_clone,
             gnss_resets: self.gnss_pos.resets + self.gnss_vel.resets,

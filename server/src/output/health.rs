@@ -104,6 +104,7 @@ impl HealthWindow {
                 baro_accepted: count(InputKind::Baro),
                 camera_accepted: count(InputKind::Camera),
                 imu_clipped: engine.imu_clipped,
+                imu_gaps_bridged: engine.imu_gaps_bridged,
             }),
             vision: if shared.camera().is_some() {
                 self.last_vision

@@ -309,6 +309,7 @@ pub fn spawn(
         span,
         divergence_resets: 0,
         imu_clipped: 0,
+        imu_gaps_bridged: 0,
         busy_reports: 2,
     };
     tokio::spawn(async move {
@@ -342,6 +343,8 @@ struct Actor {
     divergence_resets: u64,
     /// The engine's clipped IMU samples at the last health report (likewise).
     imu_clipped: u64,
+    /// The engine's bridged IMU gaps at the last health report (likewise).
+    imu_gaps_bridged: u64,
     /// Reports still due at every period: a message makes it 2 (the report covering it, and the
     /// next, whose rates show the vehicle went quiet).
     busy_reports: u8,
@@ -716,6 +719,8 @@ impl Actor {
         }
         let clipped = counted_since(&mut self.imu_clipped, engine.imu_clipped);
         self.ctx.metrics.imu_clipped.inc_by(clipped);
+        let bridged = counted_since(&mut self.imu_gaps_bridged, engine.imu_gaps_bridged);
+        self.ctx.metrics.imu_gaps_bridged.inc_by(bridged);
         let report =
             Arc::new(
                 self.window

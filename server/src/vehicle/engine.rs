@@ -48,6 +48,8 @@ pub struct EngineHealth {
     pub divergence_resets: u64,
     /// IMU samples the estimator found clipped (at the sensor's range) so far.
     pub imu_clipped: u64,
+    /// IMU gaps the estimator bridged instead of restarting so far.
+    pub imu_gaps_bridged: u64,
     /// The GNSS velocity's delay in use, s (`eskf`: learnt from the data).
     pub gnss_velocity_delay_s: Option<f64>,
     /// Where the heading comes from and the compass's state (None from an engine that cannot

@@ -144,6 +144,7 @@ impl Engine for RunnerEngine {
             engine_dropped: h.inputs_rejected + h.late_dropped + v.abandoned,
             divergence_resets: u64::from(h.divergence_resets),
             imu_clipped: h.imu_clipped,
+            imu_gaps_bridged: h.imu_gaps_bridged,
             gnss_velocity_delay_s: h.gnss_velocity_delay_s,
             heading: Some(heading_to_wire(&h.heading, h.yaw_resets)),
             imu_noise: h

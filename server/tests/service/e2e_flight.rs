@@ -186,6 +186,45 @@ async fn clipped_imu_samples_reach_health_and_metrics() {
     server.shutdown().await.unwrap();
 }
 
+/// A link that drops for 0.8 s (every sensor) in flight: the estimator bridges the gap instead of
+/// restarting, and says so in the vehicle's health and in `/metrics`.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_dropped_link_is_bridged_and_counted() {
+    let (config, events) = common::sim_flight("smoke", 6.0);
+    let t0 = events.iter().map(|e| e.t_ns()).min().unwrap();
+    let hole = (t0 + 4_000_000_000)..(t0 + 4_800_000_000);
+    let events: Vec<_> = events
+        .into_iter()
+        .filter(|e| !hole.contains(&e.t_ns()))
+        .collect();
+    let server = Server::start(test_config()).await.unwrap();
+    configure_and_feed(&server, "gap", &config, &events).await;
+    let h = server.registry().get("gap").unwrap();
+    let report = || h.shared.latest_health.borrow().clone();
+    let bridged = || {
+        report()
+            .and_then(|r| r.counters)
+            .map_or(0, |c| c.imu_gaps_bridged)
+    };
+    assert!(
+        common::eventually(Duration::from_secs(10), || bridged() == 1).await,
+        "health says {:?}",
+        report()
+    );
+    assert_eq!(server.metrics().imu_gaps_bridged.get(), 1);
+    assert!(
+        server
+            .metrics()
+            .encode()
+            .contains("uavnav_imu_gaps_bridged_total 1")
+    );
+    // Not restarted: no input refused, and the estimator is still navigating.
+    let r = report().unwrap();
+    assert_eq!(r.counters.unwrap().dropped, 0, "{r:?}");
+    assert_eq!(r.mode, pb::EstimatorMode::Nominal as i32, "{r:?}");
+    server.shutdown().await.unwrap();
+}
+
 /// A vehicle configured without a receiver: the real engine starts it from the IMU alone and
 /// its poses carry the attitude only (`eskf::gnssless`, and `paper::gnssless` for a vehicle of
 /// the `paper` profile).

@@ -78,6 +78,8 @@ pub struct RunOutput {
     /// The IMU's measured noise over its configured (gyro, accelerometer σ ratios), sampled
     /// once a second of sensor time (`eskf`; empty for `paper`).
     pub imu_noise: Vec<[f64; 2]>,
+    /// IMU gaps the estimator bridged instead of restarting (`eskf`).
+    pub imu_gaps_bridged: u64,
 }
 
 /// Inputs the estimator accepted, per sensor.
@@ -229,6 +231,7 @@ pub fn run_dataset(
         out.gnss_delay_s = stated_delay_s.zip(health.gnss_velocity_delay_s);
     }
     out.heading = (health.heading, health.yaw_resets);
+    out.imu_gaps_bridged = health.imu_gaps_bridged;
     // Truth first; a reference (another estimator's output) only where there is no truth, under
     // its own name, and screened against the fixes first (an autopilot's EKF that failed
     // outright must not be reported as our drift).
@@ -308,6 +311,13 @@ pub fn run(args: Args) -> CliResult {
         crate::estimate_report::sources_label(&out),
         args.out.display()
     );
+    if out.imu_gaps_bridged > 0 {
+        eprintln!(
+            "uavnav: {} IMU gaps of 0.5-5 s bridged (integrated across with a widened \
+             covariance instead of restarting the estimator)",
+            out.imu_gaps_bridged
+        );
+    }
     if let Some((stated, learnt)) = out.gnss_delay_s
         && (stated - learnt).abs() >= 1e-3
     {

@@ -84,6 +84,7 @@ fn line(h: &pb::VehicleHealth, json: bool) -> String {
             "latency_p50_s": l.p50_s, "latency_p99_s": l.p99_s, "latency_max_s": l.max_s,
             "accepted": c.accepted, "rejected": c.rejected, "late": c.late, "shed": c.shed, "dropped": c.dropped,
             "gnss_gate_rejections": c.gnss_gate_rejections, "vision_gate_rejections": c.vision_gate_rejections,
+            "imu_clipped": c.imu_clipped, "imu_gaps_bridged": c.imu_gaps_bridged,
         })
         .to_string();
     }
