@@ -4,11 +4,11 @@
 //!
 //! | module | what it holds |
 //! |---|---|
-//! | this file | the filter's state, horizon stepping (and bridged IMU gaps, eq. G1), buffered events, GNSS, baro and vision fusion |
+//! | this file | the filter's state, horizon stepping, buffered events, GNSS, baro and vision fusion |
 //! | [`heading`] | the heading lifecycle ([`HeadingSource`]), magnetometer and yaw-bank alignment |
 //! | [`gnssless`] | the start without GNSS, attitude only until the first fix |
 //! | [`imu_noise`] | the IMU's noise measured from its samples, clipping, and their report in health |
-//! | [`outage`] | the limit of dead reckoning in a GNSS outage: a position hold until the next fix |
+//! | [`outage`] | the limit of dead reckoning in a GNSS outage: a position hold until the next fix; bridged IMU gaps (eq. G1) |
 //! | `report` | mode, health, the pose output, the motion prior for vision |
 
 mod delay;
@@ -44,7 +44,7 @@ use crate::params::EstimatorParams;
 use crate::prediction::{
     ErrorDynamics, GravityCache, ImuMean, ProcessNoise, earth_rate_ned, integrate_nominal,
 };
-use crate::state::{Cov, ErrVec, IP, ITH, IV, Nominal, PoseClone, augment_clone, clear_clone};
+use crate::state::{Cov, ErrVec, ITH, Nominal, PoseClone, augment_clone, clear_clone};
 use crate::yaw_estimator::YawEstimator;
 
 /// Covariance-prediction accumulator (PX4 downsampling of the covariance prediction).
@@ -503,40 +503,6 @@ impl Eskf {
         if self.acc.dt_s >= self.params.cov_period_s {
             self.flush_cov();
         }
-    }
-
-    /// After integrating across a bridged IMU gap of `gap_s` between the samples `a` and `b`:
-    /// the covariance takes the rotation and acceleration the gap did not show, and the output
-    /// predictor starts again from the filter. The interval was integrated with the mean of `a`
-    /// and `b`, as any interval is; what that misses is a rate or specific force that changed in
-    /// between, so the unseen rate's σ is the larger of
-    /// `EstimatorParams::bridge_rate_sigma_radps` and half the change from `a` to `b` (a vehicle
-    /// that was turning differently at each end of the gap did something the mean cannot say),
-    /// and the same for the specific force (`bridge_accel_sigma_mps2`). Eq. G1:
-    /// `σ_θ² += (T max(σ_ω, |ω_b − ω_a| / 2))²` (at most 30°), `σ_v² += (T σ_a)²`,
-    /// `σ_p² += (T² σ_a / 2)²`, each axis.
-    fn widen_for_gap(&mut self, a: &ImuSample, b: &ImuSample, gap_s: f64) {
-        if self.x.is_none() {
-            return;
-        }
-        self.flush_cov();
-        let prm = &self.params;
-        let rate = prm
-            .bridge_rate_sigma_radps
-            .max(0.5 * (b.gyro_radps - a.gyro_radps).norm());
-        let accel = prm
-            .bridge_accel_sigma_mps2
-            .max(0.5 * (b.accel_mps2 - a.accel_mps2).norm());
-        let att_var = (rate * gap_s).min(30f64.to_radians()).powi(2);
-        let vel_var = (accel * gap_s).powi(2);
-        let pos_var = (0.5 * accel * gap_s * gap_s).powi(2);
-        for i in 0..3 {
-            self.p[(ITH + i, ITH + i)] += att_var;
-            self.p[(IV + i, IV + i)] += vel_var;
-            self.p[(IP + i, IP + i)] += pos_var;
-        }
-        self.corrected = true;
-        self.gap_fix_pending = true;
     }
 
     /// Propagates the covariance over the accumulated interval.

@@ -22,6 +22,11 @@
 //!   `resets`), and the attitude, biases and heading carry on. Unlike the start without GNSS,
 //!   nothing is rebuilt: the filter was right about everything the hold kept.
 //!
+//! **An IMU gap** of 0.5–5 s (a dropped link, a stalled logger) is the same kind of blind spell,
+//! shorter: [`Eskf::widen_for_gap`] (eq. G1) widens what integrating across it cannot know, and
+//! the next fix widens the position and velocity to its innovation ([`Eskf::widen_to_fix`]), as
+//! at the end of an outage.
+//!
 //! **The heading while nothing observes it.** A gyro's scale-factor error (`gyro_scale_sigma`)
 //! is absorbed by the bias state and the heading corrections at the turn rate flown while GNSS
 //! velocity, a compass or vision observes the heading; without them it turns into yaw error in
@@ -33,6 +38,7 @@
 //! the hold pull the yaw and tilt harder, roll / pitch RMSE 4.7–6.2° → 6.6–7.4°).
 
 use nalgebra::Vector3;
+use uavnav_core::ImuSample;
 
 use super::Eskf;
 use crate::aid_sources::gnss_pos::GnssMeas;
@@ -104,6 +110,40 @@ impl Eskf {
     pub(super) fn end_outage_hold(&mut self, m: &GnssMeas) {
         self.hold.stop();
         self.widen_to_fix(m);
+    }
+
+    /// After integrating across a bridged IMU gap of `gap_s` between the samples `a` and `b`:
+    /// the covariance takes the rotation and acceleration the gap did not show, and the output
+    /// predictor starts again from the filter. The interval was integrated with the mean of `a`
+    /// and `b`, as any interval is; what that misses is a rate or specific force that changed in
+    /// between, so the unseen rate's σ is the larger of
+    /// `EstimatorParams::bridge_rate_sigma_radps` and half the change from `a` to `b` (a vehicle
+    /// that was turning differently at each end of the gap did something the mean cannot say),
+    /// and the same for the specific force (`bridge_accel_sigma_mps2`). Eq. G1:
+    /// `σ_θ² += (T max(σ_ω, |ω_b − ω_a| / 2))²` (at most 30°), `σ_v² += (T σ_a)²`,
+    /// `σ_p² += (T² σ_a / 2)²`, each axis.
+    pub(super) fn widen_for_gap(&mut self, a: &ImuSample, b: &ImuSample, gap_s: f64) {
+        if self.x.is_none() {
+            return;
+        }
+        self.flush_cov();
+        let prm = &self.params;
+        let rate = prm
+            .bridge_rate_sigma_radps
+            .max(0.5 * (b.gyro_radps - a.gyro_radps).norm());
+        let accel = prm
+            .bridge_accel_sigma_mps2
+            .max(0.5 * (b.accel_mps2 - a.accel_mps2).norm());
+        let att_var = (rate * gap_s).min(30f64.to_radians()).powi(2);
+        let vel_var = (accel * gap_s).powi(2);
+        let pos_var = (0.5 * accel * gap_s * gap_s).powi(2);
+        for i in 0..3 {
+            self.p[(ITH + i, ITH + i)] += att_var;
+            self.p[(IV + i, IV + i)] += vel_var;
+            self.p[(IP + i, IP + i)] += pos_var;
+        }
+        self.corrected = true;
+        self.gap_fix_pending = true;
     }
 
     /// Widens the position and velocity to at least their innovation against the fix `m`,
