@@ -148,13 +148,17 @@ impl Estimator {
         Ok(Some(o))
     }
 
-    /// Whether an IMU gap of `gap_ns` is bridged rather than refused: `eskf` with a state to
-    /// carry across, the gap within [`EstimatorParams::max_bridge_gap_ns`], and the stream not
-    /// already in a run of refused jumps.
+    /// Whether an IMU gap of `gap_ns` is bridged rather than refused: a filter with a state to
+    /// carry across (`paper`: both filters running, with GNSS), the gap within
+    /// [`EstimatorParams::max_bridge_gap_ns`], and the stream not already in a run of refused
+    /// jumps.
     fn bridges(&self, gap_ns: i64) -> bool {
         gap_ns <= self.params.max_bridge_gap_ns
             && self.jump_run.is_none()
-            && matches!(&self.profile, Profile::Eskf(e) if e.nominal().is_some())
+            && match &self.profile {
+                Profile::Eskf(e) => e.nominal().is_some(),
+                Profile::Paper(p) => p.can_bridge(),
+            }
     }
 
     fn covariance_finite(&self) -> bool {

@@ -40,7 +40,7 @@ pub struct Health {
     pub divergence_resets: u32,
     /// Inputs refused by validation (NaN, time going backwards, …).
     pub inputs_rejected: u64,
-    /// IMU gaps longer than `EstimatorParams::max_imu_gap_ns` that the `eskf` bridged instead of
+    /// IMU gaps longer than `EstimatorParams::max_imu_gap_ns` that the estimator bridged instead of
     /// restarting (`EstimatorParams::max_bridge_gap_ns`).
     pub imu_gaps_bridged: u64,
     /// Measurements that arrived behind the fusion horizon and were dropped.

@@ -13,17 +13,17 @@ pub struct EstimatorParams {
     /// covariance over accumulated intervals of about this length (PX4 `FILTER_UPDATE_PERIOD`).
     pub cov_period_s: f64,
     /// Largest gap between consecutive IMU samples taken as an ordinary interval, ns. A larger
-    /// one is bridged (`eskf`, up to [`Self::max_bridge_gap_ns`]) or, beyond that, refused until
+    /// one is bridged (up to [`Self::max_bridge_gap_ns`]) or, beyond that, refused until
     /// the stream is continuous again, when the estimator restarts.
     pub max_imu_gap_ns: i64,
-    /// Largest IMU gap the `eskf` bridges instead of restarting, ns: a telemetry link that drops
+    /// Largest IMU gap the estimator bridges instead of restarting, ns: a telemetry link that drops
     /// for a few seconds, or a logger that stalls. The interval is integrated with the rates and
     /// specific force of the samples either side of it, as any interval is, and the covariance
     /// then takes what that cannot know ([`Self::bridge_rate_sigma_radps`],
     /// [`Self::bridge_accel_sigma_mps2`]). A restart would forget the heading, the biases and the
     /// tilt, and a flying vehicle without a compass can take minutes of manoeuvres to find its
     /// heading again. Longer gaps (a vehicle disarmed between flights, a clock that jumped) still
-    /// restart. 5 s; the `paper` profile always restarts.
+    /// restart. 5 s. Both profiles (`paper` once both its filters run with GNSS).
     pub max_bridge_gap_ns: i64,
     /// 1-σ of the angular rate a bridged gap did not see, per axis, rad/s, at least (half the
     /// change of the rate across the gap when that is larger): over a gap of `T` the attitude

@@ -282,6 +282,33 @@ pub fn interval_noise_var(
 }
 
 /// Makes `p` exactly symmetric.
+/// Eq. G1: what integrating across a bridged IMU gap of `gap_s` between the samples `a` and `b`
+/// (with their mean, as any interval is) cannot know, as variances per axis to add to the
+/// attitude (rad²), velocity (m²/s²) and position (m²). What the mean misses is a rate or
+/// specific force that changed in between, so the unseen rate's σ is the larger of
+/// `EstimatorParams::bridge_rate_sigma_radps` and half the change from `a` to `b` (a vehicle that
+/// was turning differently at each end of the gap did something the mean cannot say), and the
+/// same for the specific force: `σ_θ² = (T max(σ_ω, |ω_b − ω_a| / 2))²` (at most 30°),
+/// `σ_v² = (T σ_a)²`, `σ_p² = (T² σ_a / 2)²`.
+pub fn gap_variances(
+    params: &crate::EstimatorParams,
+    a: &uavnav_core::ImuSample,
+    b: &uavnav_core::ImuSample,
+    gap_s: f64,
+) -> [f64; 3] {
+    let rate = params
+        .bridge_rate_sigma_radps
+        .max(0.5 * (b.gyro_radps - a.gyro_radps).norm());
+    let accel = params
+        .bridge_accel_sigma_mps2
+        .max(0.5 * (b.accel_mps2 - a.accel_mps2).norm());
+    [
+        (rate * gap_s).min(30f64.to_radians()).powi(2),
+        (accel * gap_s).powi(2),
+        (0.5 * accel * gap_s * gap_s).powi(2),
+    ]
+}
+
 pub fn symmetrize(p: &mut Cov) {
     for i in 0..N {
         for j in (i + 1)..N {

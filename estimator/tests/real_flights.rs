@@ -470,6 +470,10 @@ fn survey() {
     // `UAVNAV_SURVEY_NO_MAG_CAL`: without the in-flight compass calibration (eq. M2), for A/B.
     let mut params = EstimatorParams::default();
     params.mag_calibration.enabled = std::env::var("UAVNAV_SURVEY_NO_MAG_CAL").is_err();
+    // `UAVNAV_SURVEY_NO_BRIDGE`: IMU gaps restart the estimator instead of being bridged (A/B).
+    if std::env::var("UAVNAV_SURVEY_NO_BRIDGE").is_ok() {
+        params.max_bridge_gap_ns = 0;
+    }
     let mut bad = Vec::new();
     for dir in dirs {
         let name = dir.file_name().unwrap().to_string_lossy().into_owned();

@@ -43,6 +43,7 @@ use uavnav_core::ImuSample;
 use super::Eskf;
 use crate::aid_sources::gnss_pos::GnssMeas;
 use crate::aid_sources::position_hold::HoldState;
+use crate::prediction::gap_variances;
 use crate::state::{Cov, IP, ITH, IV, N};
 
 impl Eskf {
@@ -113,30 +114,15 @@ impl Eskf {
     }
 
     /// After integrating across a bridged IMU gap of `gap_s` between the samples `a` and `b`:
-    /// the covariance takes the rotation and acceleration the gap did not show, and the output
-    /// predictor starts again from the filter. The interval was integrated with the mean of `a`
-    /// and `b`, as any interval is; what that misses is a rate or specific force that changed in
-    /// between, so the unseen rate's σ is the larger of
-    /// `EstimatorParams::bridge_rate_sigma_radps` and half the change from `a` to `b` (a vehicle
-    /// that was turning differently at each end of the gap did something the mean cannot say),
-    /// and the same for the specific force (`bridge_accel_sigma_mps2`). Eq. G1:
-    /// `σ_θ² += (T max(σ_ω, |ω_b − ω_a| / 2))²` (at most 30°), `σ_v² += (T σ_a)²`,
-    /// `σ_p² += (T² σ_a / 2)²`, each axis.
+    /// the covariance takes what that cannot know (eq. G1, [`gap_variances`]), and the output
+    /// predictor starts again from the filter; the next fix widens the position and velocity to
+    /// its innovation ([`Eskf::widen_to_fix`]).
     pub(super) fn widen_for_gap(&mut self, a: &ImuSample, b: &ImuSample, gap_s: f64) {
         if self.x.is_none() {
             return;
         }
         self.flush_cov();
-        let prm = &self.params;
-        let rate = prm
-            .bridge_rate_sigma_radps
-            .max(0.5 * (b.gyro_radps - a.gyro_radps).norm());
-        let accel = prm
-            .bridge_accel_sigma_mps2
-            .max(0.5 * (b.accel_mps2 - a.accel_mps2).norm());
-        let att_var = (rate * gap_s).min(30f64.to_radians()).powi(2);
-        let vel_var = (accel * gap_s).powi(2);
-        let pos_var = (0.5 * accel * gap_s * gap_s).powi(2);
+        let [att_var, vel_var, pos_var] = gap_variances(&self.params, a, b, gap_s);
         for i in 0..3 {
             self.p[(ITH + i, ITH + i)] += att_var;
             self.p[(IV + i, IV + i)] += vel_var;

@@ -364,6 +364,19 @@ impl PaperFilter {
             .at(&frame, &gi.x);
         let q_acc = accel_psd + m.accel.norm_squared() * att_var + self.accel_bias_psd;
         gi.predict(&c, &m.accel, &g, &self.w_ie, dt_s, q_acc);
+        if s.t_ns - prev.t_ns > self.params.max_imu_gap_ns {
+            // A gap `Estimator` chose to bridge: eq. G1, as `eskf` does. The tilt window that
+            // spans it compares velocities the gap's integration cannot vouch for: dropped.
+            let [att_g, vel_g, pos_g] =
+                crate::prediction::gap_variances(&self.params, &prev, s, dt_s);
+            att.widen_tilt(att_g);
+            att.widen_yaw(att_g);
+            for k in 0..3 {
+                gi.p[(k, k)] += pos_g;
+                gi.p[(3 + k, 3 + k)] += vel_g;
+            }
+            self.gnss_tilt.drop_window();
+        }
         self.gnss_tilt.add_imu(&c, &m.accel, accel_psd, dt_s);
         self.vel_hist.push_back((s.t_ns, gi.v));
         while self
@@ -398,6 +411,11 @@ impl PaperFilter {
         }
         self.hold_tilt_in_outage(s.t_ns, &frame);
         self.output(s.t_ns)
+    }
+
+    /// Whether an IMU gap can be bridged (`Estimator::bridges`): both filters running, with GNSS.
+    pub fn can_bridge(&self) -> bool {
+        self.att.is_some() && self.gps_imu.is_some() && !self.gnssless
     }
 
     /// VIDEO-IMU(1)'s prediction over one IMU interval (eq. 31), with the process noise the data

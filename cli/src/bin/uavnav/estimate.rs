@@ -78,7 +78,7 @@ pub struct RunOutput {
     /// The IMU's measured noise over its configured (gyro, accelerometer σ ratios), sampled
     /// once a second of sensor time (`eskf`; empty for `paper`).
     pub imu_noise: Vec<[f64; 2]>,
-    /// IMU gaps the estimator bridged instead of restarting (`eskf`).
+    /// IMU gaps the estimator bridged instead of restarting.
     pub imu_gaps_bridged: u64,
 }
 
