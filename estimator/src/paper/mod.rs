@@ -429,14 +429,23 @@ impl PaperFilter {
         let att = self.att.as_mut()?;
         let m = mean_of(prev, s);
         let dt_s = (s.t_ns - prev.t_ns) as f64 * 1e-9;
-        let (gyro_psd, accel_psd) = observe_imu_noise(
-            &mut self.observed_psd,
-            prev,
-            s,
-            dt_s,
-            self.gyro_psd,
-            self.accel_psd,
-        );
+        let (gyro_psd, accel_psd) = if s.t_ns - prev.t_ns > self.params.max_imu_gap_ns {
+            // A bridged gap: the samples either side of it say nothing of the IMU's noise, and
+            // eq. G1 widens for what the gap hid (`push_imu`).
+            (
+                self.gyro_psd.max(self.observed_psd.0),
+                self.accel_psd.max(self.observed_psd.1),
+            )
+        } else {
+            observe_imu_noise(
+                &mut self.observed_psd,
+                prev,
+                s,
+                dt_s,
+                self.gyro_psd,
+                self.accel_psd,
+            )
+        };
         let gyro = m.gyro - self.gnss_tilt.gyro_bias_radps();
         att.predict(
             &gyro,
