@@ -5,6 +5,8 @@
 //! late runs from its first fix exactly as if the filter had waited.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
+mod common;
+
 use uavnav_core::rotation::euler_error;
 use uavnav_core::truth::truth_at;
 use uavnav_core::{FilterProfile, Mode, VehicleConfig};
@@ -24,28 +26,7 @@ fn flight() -> Flight {
 
 /// Feeds the flight in time order, GNSS only from `gnss_from_ns`; returns the poses.
 fn fly(est: &mut Estimator, f: &Flight, gnss_from_ns: Option<i64>) -> Vec<PoseOutput> {
-    let (mut g, mut m, mut b) = (0, 0, 0);
-    let mut out = Vec::new();
-    for s in f.imu() {
-        while g < f.gnss().len() && f.gnss()[g].t_ns <= s.t_ns {
-            if gnss_from_ns.is_some_and(|t| f.gnss()[g].t_ns >= t) {
-                est.push_gnss(&f.gnss()[g]).unwrap();
-            }
-            g += 1;
-        }
-        while m < f.mag().len() && f.mag()[m].t_ns <= s.t_ns {
-            est.push_mag(&f.mag()[m]).unwrap();
-            m += 1;
-        }
-        while b < f.baro().len() && f.baro()[b].t_ns <= s.t_ns {
-            est.push_baro(&f.baro()[b]).unwrap();
-            b += 1;
-        }
-        if let Some(p) = est.push_imu(s).unwrap() {
-            out.push(p);
-        }
-    }
-    out
+    common::fly_where(est, f, |t| gnss_from_ns.is_some_and(|g| t >= g), |_| true)
 }
 
 /// (roll/pitch/yaw RMSE, fraction of attitude axes within 3σ) after `after_ns`, rad.

@@ -5,6 +5,8 @@
 //! compass had found; longer gaps still restart.
 #![allow(clippy::unwrap_used)] // tests, examples and benches may unwrap
 
+mod common;
+
 use uavnav_core::rotation::wrap_pi;
 use uavnav_core::truth::truth_at;
 use uavnav_core::{Airframe, FilterProfile, PoseOutput};
@@ -42,58 +44,11 @@ fn fly_profile_with_gap(
     config.profile = profile;
     let mut est = Estimator::new(&config, params, Some(f.origin()));
     let t0 = f.scenario().t0_ns;
-    let cut = |t: i64| {
+    let kept = |t: i64| {
         let s = (t - t0) as f64 * 1e-9;
-        s >= from_s && s < to_s
+        s < from_s || s >= to_s
     };
-    let mut g = 0;
-    let mut out = Vec::new();
-    for s in f.imu() {
-        while g < f.gnss().len() && f.gnss()[g].t_ns <= s.t_ns {
-            if !cut(f.gnss()[g].t_ns) {
-                est.push_gnss(&f.gnss()[g]).unwrap();
-            }
-            g += 1;
-        }
-        if cut(s.t_ns) {
-            continue;
-        }
-        // Refused samples (a gap not bridged, before the restart) give no pose.
-        if let Ok(Some(p)) = est.push_imu(s) {
-            if std::env::var("UAVNAV_GAP_TRACE").is_ok()
-                && (p.t_ns - t0)
-                    % std::env::var("UAVNAV_GAP_TRACE")
-                        .unwrap()
-                        .parse::<i64>()
-                        .unwrap()
-                    == 0
-            {
-                let t = truth_at(f.truth(), p.t_ns).unwrap();
-                let Some(e) = est.eskf() else {
-                    out.push(p);
-                    continue;
-                };
-                eprintln!(
-                    "t {:.2} yaw err {:.1} sigma {:.1} tilt err {:.1?} src {:?} resets {} bank {:?} verr {:.2?} sv {:.2} vtr {:.2} ptr {:.2} vres {}",
-                    (p.t_ns - t0) as f64 * 1e-9,
-                    wrap_pi(p.euler_rad.z - t.nav_from_body.euler_angles().2).to_degrees(),
-                    p.sigma_att_rad.z.to_degrees(),
-                    ((p.nav_from_body * t.nav_from_body.inverse()).scaled_axis() * 57.3).as_slice(),
-                    e.heading_source(),
-                    est.health().yaw_resets,
-                    e.yaw_estimator()
-                        .yaw()
-                        .map(|(y, s)| (y.to_degrees().round(), s.to_degrees().round())),
-                    (p.vel_ned_mps - t.vel_ned_mps).as_slice(),
-                    p.sigma_vel_mps.x,
-                    p.health.gnss_vel.test_ratio,
-                    p.health.gnss_pos.test_ratio,
-                    est.health().gnss_resets,
-                );
-            }
-            out.push(p);
-        }
-    }
+    let out = common::fly_where(&mut est, f, kept, kept);
     (out, est)
 }
 

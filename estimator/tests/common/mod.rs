@@ -196,23 +196,47 @@ pub fn run(flight: &Flight, cfg: &RunCfg) -> Vec<PoseOutput> {
 /// Feeds every GNSS fix, compass and barometer sample of the flight in time order before the
 /// IMU sample they precede; returns the poses.
 pub fn fly_all(est: &mut Estimator, f: &Flight) -> Vec<PoseOutput> {
+    fly_where(est, f, |_| true, |_| true)
+}
+
+/// [`fly_all`], feeding only the GNSS fixes stamped at a time `gnss` keeps and the other samples
+/// at a time `rest` keeps (an outage, a late first fix, a dropped link). An IMU sample the
+/// estimator refuses as a time jump (a gap the caller cut, before the restart) gives no pose;
+/// any other refusal fails the test.
+pub fn fly_where(
+    est: &mut Estimator,
+    f: &Flight,
+    gnss: impl Fn(i64) -> bool,
+    rest: impl Fn(i64) -> bool,
+) -> Vec<PoseOutput> {
     let (mut g, mut m, mut b) = (0, 0, 0);
     let mut out = Vec::new();
     for s in f.imu() {
         while g < f.gnss().len() && f.gnss()[g].t_ns <= s.t_ns {
-            est.push_gnss(&f.gnss()[g]).unwrap();
+            if gnss(f.gnss()[g].t_ns) {
+                est.push_gnss(&f.gnss()[g]).unwrap();
+            }
             g += 1;
         }
         while m < f.mag().len() && f.mag()[m].t_ns <= s.t_ns {
-            est.push_mag(&f.mag()[m]).unwrap();
+            if rest(f.mag()[m].t_ns) {
+                est.push_mag(&f.mag()[m]).unwrap();
+            }
             m += 1;
         }
         while b < f.baro().len() && f.baro()[b].t_ns <= s.t_ns {
-            est.push_baro(&f.baro()[b]).unwrap();
+            if rest(f.baro()[b].t_ns) {
+                est.push_baro(&f.baro()[b]).unwrap();
+            }
             b += 1;
         }
-        if let Some(p) = est.push_imu(s).unwrap() {
-            out.push(p);
+        if !rest(s.t_ns) {
+            continue;
+        }
+        match est.push_imu(s) {
+            Ok(p) => out.extend(p),
+            Err(uavnav_estimator::InputError::TimeJump { .. }) => {}
+            Err(e) => panic!("IMU sample at {} ns refused: {e}", s.t_ns),
         }
     }
     out
