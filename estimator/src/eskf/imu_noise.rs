@@ -14,7 +14,7 @@ pub const CLIP_ACCEL_SIGMA_MPS2: f64 = 10.0;
 /// 1-σ of the rate a clipped gyro axis may have missed, rad/s.
 pub const CLIP_GYRO_SIGMA_RADPS: f64 = 1.0;
 /// Time constant of the IMU noise ratio reported in health (`Health::imu_noise_ratio`), s: one
-/// 10 ms covariance interval holds two sample differences, too few to report alone.
+/// 20 ms covariance interval holds four sample differences at 200 Hz, too few to report alone.
 pub const IMU_NOISE_TAU_S: f64 = 1.0;
 
 /// Whether the interval `a`–`b` has a clipped accelerometer / gyro axis: at or beyond the
