@@ -32,6 +32,7 @@
 //! | [`output::health`] | per-vehicle health reports |
 //! | [`output::record`] | recording of accepted inputs and poses to rotating MCAP files |
 //! | [`metrics`] | Prometheus metrics |
+//! | [`process`] | the process's own CPU time and resident memory, for `/metrics` |
 //! | [`security`] | TLS (reloadable), principals and grants, the Zenoh access control, the exposure check |
 //! | [`shutdown`] | signals and the drain order |
 //! | [`logging`] | `tracing` subscriber setup |
@@ -47,6 +48,7 @@ pub mod ingest;
 pub mod logging;
 pub mod metrics;
 pub mod output;
+pub mod process;
 pub mod security;
 pub mod server;
 pub mod service;

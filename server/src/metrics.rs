@@ -281,6 +281,10 @@ pub struct Metrics {
     pub frames_rejected: Family<FrameRejectLabels, Counter>,
     /// Estimator resets after a non-finite state (the vehicle reported DIVERGED).
     pub divergence_resets: Counter,
+    /// CPU time of the whole process, s (`crate::process`; brought up to date when encoded).
+    pub process_cpu: Counter<f64, std::sync::atomic::AtomicU64>,
+    /// Resident memory of the process, bytes (brought up to date when encoded).
+    pub process_resident: Gauge,
     /// IMU samples the estimators found clipped (at the sensor's range), all vehicles.
     pub imu_clipped: Counter,
     /// IMU gaps the estimators bridged instead of restarting.
@@ -327,6 +331,8 @@ impl Metrics {
         let clock_resyncs = Family::<ResyncLabels, Counter>::default();
         let frames_rejected = Family::<FrameRejectLabels, Counter>::default();
         let divergence_resets = Counter::default();
+        let process_cpu = Counter::<f64, std::sync::atomic::AtomicU64>::default();
+        let process_resident = Gauge::default();
         registry.register(
             "clock_resyncs",
             "Vehicles taken back at a new time after a consistent jump of their clock",
@@ -341,6 +347,16 @@ impl Metrics {
             "divergence_resets",
             "Estimator resets after a non-finite state (reported as mode DIVERGED)",
             divergence_resets.clone(),
+        );
+        registry.register(
+            "process_cpu_seconds",
+            "User and system CPU time of the service process, s (Linux /proc; 0 elsewhere)",
+            process_cpu.clone(),
+        );
+        registry.register(
+            "process_resident_memory_bytes",
+            "Resident memory of the service process, bytes (Linux /proc; 0 elsewhere)",
+            process_resident.clone(),
         );
         registry.register(
             "inputs",
@@ -511,6 +527,8 @@ impl Metrics {
             clock_resyncs,
             frames_rejected,
             divergence_resets,
+            process_cpu,
+            process_resident,
             imu_clipped,
             imu_gaps_bridged,
             security,
@@ -566,10 +584,30 @@ impl Metrics {
 
     /// The text exposition of every metric.
     pub fn encode(&self) -> String {
+        self.update_process();
         let mut out = String::new();
         // Writing into a String cannot fail.
         let _ = prometheus_client::encoding::text::encode(&mut out, &self.registry);
         out
+    }
+}
+
+impl Metrics {
+    /// Brings the process figures up to date. The CPU counter moves forward by the time used
+    /// since it was last brought up to date; one update at a time, or two scrapes at once
+    /// would both add the same difference.
+    fn update_process(&self) {
+        static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+        let _guard = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
+        let Some(now) = crate::process::read() else {
+            return;
+        };
+        let delta = now.cpu_s - self.process_cpu.get();
+        if delta > 0.0 {
+            self.process_cpu.inc_by(delta);
+        }
+        self.process_resident
+            .set(i64::try_from(now.resident_bytes).unwrap_or(i64::MAX));
     }
 }
 

@@ -62,10 +62,24 @@ async fn loadtest_measures_against_the_service_and_the_discard_sink() {
         "--quiet".into(),
         "--json".into(),
         json.display().to_string(),
+        "--metrics".into(),
+        format!("http://{}/metrics", svc.server.http_addr),
     ])
     .await;
     assert_eq!(out.status.code(), Some(0));
     assert!(stdout(&out).contains("Latency (ingest to pose)"));
+    // The service's own CPU per accepted input, from its /metrics before and after (Linux).
+    if cfg!(target_os = "linux") {
+        let text = stdout(&out);
+        let line = text
+            .lines()
+            .find(|l| l.contains("Service process:"))
+            .unwrap_or_else(|| panic!("{text}"));
+        assert!(
+            line.contains("µs per accepted input") && line.contains("MiB resident"),
+            "{line}"
+        );
+    }
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let count = v["count"].as_u64().unwrap();

@@ -235,6 +235,21 @@ async fn http_endpoints() {
         m.contains("uavnav_vehicles") && m.contains("uavnav_ingest_to_pose_latency_seconds"),
         "{m}"
     );
+    // The process's own figures, what `uavnav loadtest --metrics` divides by the samples.
+    let value = |text: &str, name: &str| -> Option<f64> {
+        text.lines()
+            .find(|l| l.starts_with(name) && l[name.len()..].starts_with(' '))
+            .and_then(|l| l[name.len()..].trim().parse().ok())
+    };
+    if cfg!(target_os = "linux") {
+        let cpu = value(&m, "uavnav_process_cpu_seconds_total");
+        let rss = value(&m, "uavnav_process_resident_memory_bytes");
+        assert!(cpu.is_some_and(|c| c > 0.0), "{m}");
+        assert!(rss.is_some_and(|r| r > 1e6), "{m}");
+        // A counter: a later scrape never reads less.
+        let later = value(&get("/metrics").await, "uavnav_process_cpu_seconds_total");
+        assert!(later >= cpu, "{later:?} after {cpu:?}");
+    }
     server.shutdown().await.unwrap();
 }
 

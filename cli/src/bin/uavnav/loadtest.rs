@@ -23,6 +23,7 @@ use uavnav_client::{Client, pb};
 
 use crate::common::{CliError, CliResult, progress};
 use crate::endpoint::{DEFAULT_URL, SecurityArgs, block_on_threads, client_err, connect};
+use crate::service_cpu;
 
 /// The built-in flight (the repository's smoke scenario).
 const SMOKE_SCENARIO: &str = include_str!("../../../../scenarios/smoke.toml");
@@ -97,6 +98,11 @@ pub struct Args {
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// The service's metrics, http://HOST:PORT/PATH (its side port: `http://127.0.0.1:9464/metrics`
+    /// by default): its process CPU and resident memory are read before and after the run and
+    /// the CPU per accepted input printed. Plain HTTP, no token; not with --ramp.
+    #[arg(long, conflicts_with = "ramp")]
+    pub metrics: Option<String>,
 }
 
 /// `30s`, `2m`, `500ms`, `1h`, or plain seconds.
@@ -246,6 +252,15 @@ pub fn run(args: Args) -> CliResult {
         let target = client.endpoint().to_string();
         let tag = run_tag();
         if !args.ramp {
+            let before = match &args.metrics {
+                Some(url) => Some(
+                    service_cpu::scrape(url)
+                        .await
+                        .map_err(|e| CliError::input(anyhow::anyhow!("--metrics: {e}")))?,
+                ),
+                None => None,
+            };
+            let started = std::time::Instant::now();
             let o = stage(
                 &client,
                 &rec,
@@ -255,8 +270,18 @@ pub fn run(args: Args) -> CliResult {
                 Arc::default(),
             )
             .await?;
+            let wall_s = started.elapsed().as_secs_f64();
             let report = Report::new(&o, &target, camera, &thresholds);
             print!("{}", report.table());
+            if let (Some(url), Some(before)) = (&args.metrics, before) {
+                match service_cpu::scrape(url).await {
+                    Ok(after) => println!(
+                        "{}",
+                        service_cpu::line(&before, &after, wall_s, report.uavnav.service.accepted)
+                    ),
+                    Err(e) => eprintln!("uavnav: --metrics after the run: {e}"),
+                }
+            }
             write_json(
                 args.json.as_ref(),
                 &serde_json::to_value(&report).map_err(CliError::runtime)?,

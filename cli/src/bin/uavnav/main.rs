@@ -30,6 +30,7 @@ mod loadtest;
 mod record;
 mod replay;
 mod reset;
+mod service_cpu;
 mod vehicles;
 mod watch;
 
