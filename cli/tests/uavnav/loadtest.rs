@@ -79,6 +79,7 @@ async fn loadtest_measures_against_the_service_and_the_discard_sink() {
             line.contains("µs per accepted input") && line.contains("MiB resident"),
             "{line}"
         );
+        assert!(text.contains("Generator process:"), "{text}");
     }
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();

@@ -100,7 +100,8 @@ pub struct Args {
     pub quiet: bool,
     /// The service's metrics, http://HOST:PORT/PATH (its side port: `http://127.0.0.1:9464/metrics`
     /// by default): its process CPU and resident memory are read before and after the run and
-    /// the CPU per accepted input printed. Plain HTTP, no token; not with --ramp.
+    /// the CPU per accepted input printed, with the generator's own CPU. Plain HTTP, no token;
+    /// not with --ramp.
     #[arg(long, conflicts_with = "ramp")]
     pub metrics: Option<String>,
 }
@@ -261,6 +262,7 @@ pub fn run(args: Args) -> CliResult {
                 None => None,
             };
             let started = std::time::Instant::now();
+            let generator_before = uavnavd::process::read();
             let o = stage(
                 &client,
                 &rec,
@@ -280,6 +282,14 @@ pub fn run(args: Args) -> CliResult {
                         service_cpu::line(&before, &after, wall_s, report.uavnav.service.accepted)
                     ),
                     Err(e) => eprintln!("uavnav: --metrics after the run: {e}"),
+                }
+                // The generator's own share of the machine, when both run on it.
+                if let (Some(b), Some(a)) = (generator_before, uavnavd::process::read()) {
+                    let cpu_s = a.cpu_s - b.cpu_s;
+                    println!(
+                        "  Generator process: {cpu_s:.1} s of CPU over {wall_s:.1} s ({:.2} cores)",
+                        cpu_s / wall_s.max(1e-9)
+                    );
                 }
             }
             write_json(
