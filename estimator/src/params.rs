@@ -268,6 +268,15 @@ pub struct EstimatorParams {
     pub unknown_declination_sigma_rad: f64,
 }
 
+impl EstimatorParams {
+    /// Whether an IMU interval from `a_t_ns` to `b_t_ns` that reached a filter is a gap the
+    /// [`Estimator`](crate::Estimator) chose to bridge: only bridged gaps pass its validation
+    /// longer than [`Self::max_imu_gap_ns`] (eq. G1 then widens for what they hid).
+    pub fn is_bridged_gap(&self, a_t_ns: i64, b_t_ns: i64) -> bool {
+        b_t_ns - a_t_ns > self.max_imu_gap_ns
+    }
+}
+
 impl Default for EstimatorParams {
     fn default() -> Self {
         Self {

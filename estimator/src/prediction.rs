@@ -281,7 +281,6 @@ pub fn interval_noise_var(
     (dg * dt_s * dt_s / 6.0, da * dt_s * dt_s / 6.0)
 }
 
-/// Makes `p` exactly symmetric.
 /// Eq. G1: what integrating across a bridged IMU gap of `gap_s` between the samples `a` and `b`
 /// (with their mean, as any interval is) cannot know, as variances per axis to add to the
 /// attitude (rad²), velocity (m²/s²) and position (m²). What the mean misses is a rate or
@@ -309,6 +308,7 @@ pub fn gap_variances(
     ]
 }
 
+/// Makes `p` exactly symmetric.
 pub fn symmetrize(p: &mut Cov) {
     for i in 0..N {
         for j in (i + 1)..N {

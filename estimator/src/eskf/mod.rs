@@ -434,7 +434,7 @@ impl Eskf {
         }
         self.integrate_to(&a, &b, b.t_ns);
         let dt_s = (b.t_ns - a.t_ns) as f64 * 1e-9;
-        let bridged = b.t_ns - a.t_ns > self.params.max_imu_gap_ns;
+        let bridged = self.params.is_bridged_gap(a.t_ns, b.t_ns);
         if bridged {
             // A gap the estimator chose to bridge (`EstimatorParams::max_bridge_gap_ns`).
             self.widen_for_gap(&a, &b, dt_s);

@@ -364,7 +364,7 @@ impl PaperFilter {
             .at(&frame, &gi.x);
         let q_acc = accel_psd + m.accel.norm_squared() * att_var + self.accel_bias_psd;
         gi.predict(&c, &m.accel, &g, &self.w_ie, dt_s, q_acc);
-        if s.t_ns - prev.t_ns > self.params.max_imu_gap_ns {
+        if self.params.is_bridged_gap(prev.t_ns, s.t_ns) {
             // A gap `Estimator` chose to bridge: eq. G1, as `eskf` does. The tilt window that
             // spans it compares velocities the gap's integration cannot vouch for: dropped.
             let [att_g, vel_g, pos_g] =
@@ -429,7 +429,7 @@ impl PaperFilter {
         let att = self.att.as_mut()?;
         let m = mean_of(prev, s);
         let dt_s = (s.t_ns - prev.t_ns) as f64 * 1e-9;
-        let (gyro_psd, accel_psd) = if s.t_ns - prev.t_ns > self.params.max_imu_gap_ns {
+        let (gyro_psd, accel_psd) = if self.params.is_bridged_gap(prev.t_ns, s.t_ns) {
             // A bridged gap: the samples either side of it say nothing of the IMU's noise, and
             // eq. G1 widens for what the gap hid (`push_imu`).
             (
