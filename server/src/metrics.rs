@@ -590,9 +590,7 @@ impl Metrics {
         let _ = prometheus_client::encoding::text::encode(&mut out, &self.registry);
         out
     }
-}
 
-impl Metrics {
     /// Brings the process figures up to date. The CPU counter moves forward by the time used
     /// since it was last brought up to date; one update at a time, or two scrapes at once
     /// would both add the same difference.

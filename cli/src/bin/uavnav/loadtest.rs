@@ -285,11 +285,7 @@ pub fn run(args: Args) -> CliResult {
                 }
                 // The generator's own share of the machine, when both run on it.
                 if let (Some(b), Some(a)) = (generator_before, uavnavd::process::read()) {
-                    let cpu_s = a.cpu_s - b.cpu_s;
-                    println!(
-                        "  Generator process: {cpu_s:.1} s of CPU over {wall_s:.1} s ({:.2} cores)",
-                        cpu_s / wall_s.max(1e-9)
-                    );
+                    println!("{}", service_cpu::generator_line(b.cpu_s, a.cpu_s, wall_s));
                 }
             }
             write_json(

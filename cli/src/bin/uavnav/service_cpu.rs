@@ -96,6 +96,15 @@ pub fn line(before: &ServiceProcess, after: &ServiceProcess, wall_s: f64, accept
     )
 }
 
+/// The generator's line: its own CPU over the run (from `/proc/self` before and after, s).
+pub fn generator_line(before_cpu_s: f64, after_cpu_s: f64, wall_s: f64) -> String {
+    let cpu_s = after_cpu_s - before_cpu_s;
+    format!(
+        "  Generator process: {cpu_s:.1} s of CPU over {wall_s:.1} s ({:.2} cores)",
+        cpu_s / wall_s.max(1e-9)
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -141,5 +150,7 @@ mod tests {
             l.contains("4.00 µs per accepted input") && l.contains("100.0 MiB"),
             "{l}"
         );
+        let g = generator_line(1.0, 4.0, 6.0);
+        assert!(g.contains("3.0 s of CPU over 6.0 s (0.50 cores)"), "{g}");
     }
 }
