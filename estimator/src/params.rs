@@ -13,7 +13,7 @@ pub struct EstimatorParams {
     /// covariance over accumulated intervals of about this length (PX4 `FILTER_UPDATE_PERIOD`,
     /// 10 ms; ArduPilot EKF3 about 12 ms). 20 ms: the error dynamics change slowly against it
     /// (the simulated 200 Hz flights' errors and 3σ shares moved by under 1 % from 10 ms), the
-    /// real logs' IMUs at 50 Hz or less propagate every sample either way, and a 200 Hz IMU's
+    /// real logs' IMUs at 50 Hz or less propagate at nearly every sample either way, and a 200 Hz IMU's
     /// `push_imu` costs 0.92 instead of 1.12 µs per sample (`--bench filter`), for every vehicle
     /// of the service.
     pub cov_period_s: f64,
