@@ -250,6 +250,7 @@ fn bench(c: &mut Criterion) {
 /// `push_imu` as the service runs it: many vehicles, each taking a 20 ms message (4 samples) in
 /// turn, so that a vehicle's state has left the cache by the time its next message comes. The
 /// single-filter figure above runs with everything cached; this one is what a fleet pays.
+#[allow(clippy::disallowed_methods)] // a bench times itself; the estimator it times reads no clock
 fn fleet(c: &mut Criterion, f: &Flight, start: usize) {
     const PER_MESSAGE: usize = 4;
     const LAPS: usize = 100;
