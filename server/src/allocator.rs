@@ -80,6 +80,18 @@ pub fn apply_service_options() {}
 /// cores with the limit and 0.76 / 0.73 without, p99 25.6 / 25.7 against 25.8 / 25.9 ms
 /// (`--bench fleet -- --vehicles 1000 --duration-s 10`, back to back); one `mi_collect(false)`
 /// took 0.1 µs with 100 MB of small blocks live on the thread (measured once, release build).
+///
+/// Why forced: a normal collection skips the pages it holds as full (mimalloc 3 does not visit
+/// them: a page whose blocks other threads have since freed stays in the full queue, emptied but
+/// kept), keeps the pages it retired a moment ago for reuse, and purges only what the arenas
+/// already marked as due. A forced one visits every page of the thread, frees the retired ones
+/// and purges the arenas' free pages now. After all of the `memory` bench's attacks (release,
+/// 2026-12-07): +17 / +18 / +19 % above the warm baseline in three runs, anonymous 9.0–9.1 MiB
+/// against 5.5–5.6, where a normal collection left +22 / +23 % (anonymous 9.2–10.2 MiB); the
+/// stalled-streams attack alone +9 % against +13–14 %. Its cost did not show either: under
+/// `uavnav loadtest --no-camera --decimation 10` with 600 and 900 vehicles, `perf` put the
+/// collection's functions at 0.8 % of the service's CPU (0.6 % of it `_mi_page_free_collect`,
+/// which frees as often without the collection: 0.35–0.5 % in the same runs before).
 pub fn collect_on_park() {
     collect_this_thread();
 }
@@ -87,9 +99,10 @@ pub fn collect_on_park() {
 /// The one call into the allocator's C API (the workspace denies `unsafe` everywhere else).
 #[allow(unsafe_code)]
 fn collect_this_thread() {
-    // SAFETY: `mi_collect` has no preconditions: it walks the calling thread's own heap (and,
-    // without `force`, nothing else), and is safe to call from any thread at any time.
-    unsafe { libmimalloc_sys::mi_collect(false) };
+    // SAFETY: `mi_collect` has no preconditions: it walks the calling thread's own heap and
+    // (forced) purges the arenas' free pages under their own locks; it is safe to call from any
+    // thread at any time.
+    unsafe { libmimalloc_sys::mi_collect(true) };
 }
 
 #[cfg(test)]
