@@ -78,8 +78,9 @@ pub fn apply_service_options() {}
 /// 2.8 MiB baseline; collecting at every park: 4.3 MiB (`cargo bench -p uavnavd --bench memory
 /// -- --only 1 --no-zenoh`). The cost did not show: 1,000 vehicles in real time, 0.76 / 0.74
 /// cores with the limit and 0.76 / 0.73 without, p99 25.6 / 25.7 against 25.8 / 25.9 ms
-/// (`--bench fleet -- --vehicles 1000 --duration-s 10`, back to back); one `mi_collect(false)`
-/// took 0.1 µs with 100 MB of small blocks live on the thread (measured once, release build).
+/// (`--bench fleet -- --vehicles 1000 --duration-s 10`, back to back); one normal collection,
+/// `mi_collect(false)`, took 0.1 µs with 100 MB of small blocks live on the thread (measured once,
+/// release build).
 ///
 /// Why forced: a normal collection skips the pages it holds as full (mimalloc 3 does not visit
 /// them: a page whose blocks other threads have since freed stays in the full queue, emptied but
