@@ -80,6 +80,15 @@ async fn loadtest_measures_against_the_service_and_the_discard_sink() {
             "{line}"
         );
         assert!(text.contains("Generator process:"), "{text}");
+        // This machine's speed, measured before the load for as many vehicles.
+        let reference = text
+            .lines()
+            .find(|l| l.starts_with("Machine reference:"))
+            .unwrap_or_else(|| panic!("{text}"));
+        assert!(
+            reference.contains("µs per IMU sample for 2 vehicles taking 20 ms messages in turn"),
+            "{reference}"
+        );
     }
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();

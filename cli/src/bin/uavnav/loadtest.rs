@@ -23,7 +23,7 @@ use uavnav_client::{Client, pb};
 
 use crate::common::{CliError, CliResult, progress};
 use crate::endpoint::{DEFAULT_URL, SecurityArgs, block_on_threads, client_err, connect};
-use crate::service_cpu;
+use crate::{machine_ref, service_cpu};
 
 /// The built-in flight (the repository's smoke scenario).
 const SMOKE_SCENARIO: &str = include_str!("../../../../scenarios/smoke.toml");
@@ -100,8 +100,9 @@ pub struct Args {
     pub quiet: bool,
     /// The service's metrics, http://HOST:PORT/PATH (its side port: `http://127.0.0.1:9464/metrics`
     /// by default): its process CPU and resident memory are read before and after the run and
-    /// the CPU per accepted input printed, with the generator's own CPU. Plain HTTP, no token;
-    /// not with --ramp.
+    /// the CPU per accepted input printed, with the generator's own CPU and, measured before the
+    /// load, this machine's speed: the estimator alone for as many vehicles taking 20 ms messages
+    /// in turn (about a second). Plain HTTP, no token; not with --ramp.
     #[arg(long, conflicts_with = "ramp")]
     pub metrics: Option<String>,
 }
@@ -253,6 +254,11 @@ pub fn run(args: Args) -> CliResult {
         let target = client.endpoint().to_string();
         let tag = run_tag();
         if !args.ramp {
+            // Before the load, so that the two never share the machine.
+            let reference = args.metrics.as_ref().map(|_| {
+                machine_ref::measure(SMOKE_SCENARIO, args.vehicles)
+                    .inspect_err(|e| eprintln!("uavnav: machine reference not measured: {e}"))
+            });
             let before = match &args.metrics {
                 Some(url) => Some(
                     service_cpu::scrape(url)
@@ -286,6 +292,9 @@ pub fn run(args: Args) -> CliResult {
                 // The generator's own share of the machine, when both run on it.
                 if let (Some(b), Some(a)) = (generator_before, uavnavd::process::read()) {
                     println!("{}", service_cpu::generator_line(b.cpu_s, a.cpu_s, wall_s));
+                }
+                if let Some(Ok(r)) = &reference {
+                    println!("{}", machine_ref::line(r));
                 }
             }
             write_json(

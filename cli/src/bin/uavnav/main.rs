@@ -27,6 +27,7 @@ mod configure;
 mod endpoint;
 mod health;
 mod loadtest;
+mod machine_ref;
 mod record;
 mod replay;
 mod reset;
