@@ -268,7 +268,7 @@ fn fleet(c: &mut Criterion, f: &Flight, start: usize) {
                     let mut spent = std::time::Duration::ZERO;
                     for _ in 0..iters {
                         if lap == LAPS {
-                            // Boxed one by one, as the service's actors hold them (not side by side).
+                            // Each clone's filter on the heap on its own, as in the service's actors.
                             fleet = (0..vehicles).map(|_| est.clone()).collect();
                             // A clone's buffers are cut to their length: one untimed message lets
                             // them grow back to their steady size, as in a long-running service.

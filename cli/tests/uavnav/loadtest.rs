@@ -86,7 +86,7 @@ async fn loadtest_measures_against_the_service_and_the_discard_sink() {
             .find(|l| l.starts_with("Machine reference:"))
             .unwrap_or_else(|| panic!("{text}"));
         assert!(
-            reference.contains("µs per IMU sample for 2 vehicles taking 20 ms messages in turn"),
+            reference.contains("µs per IMU sample for 2 vehicles taking 4-sample messages in turn"),
             "{reference}"
         );
     }

@@ -101,8 +101,8 @@ pub struct Args {
     /// The service's metrics, http://HOST:PORT/PATH (its side port: `http://127.0.0.1:9464/metrics`
     /// by default): its process CPU and resident memory are read before and after the run and
     /// the CPU per accepted input printed, with the generator's own CPU and, measured before the
-    /// load, this machine's speed: the estimator alone for as many vehicles taking 20 ms messages
-    /// in turn (about a second). Plain HTTP, no token; not with --ramp.
+    /// load, this machine's speed: the estimator alone for as many vehicles taking messages of
+    /// --imu-batch samples in turn (about a second). Plain HTTP, no token; not with --ramp.
     #[arg(long, conflicts_with = "ramp")]
     pub metrics: Option<String>,
 }
@@ -256,7 +256,7 @@ pub fn run(args: Args) -> CliResult {
         if !args.ramp {
             // Before the load, so that the two never share the machine.
             let reference = args.metrics.as_ref().map(|_| {
-                machine_ref::measure(SMOKE_SCENARIO, args.vehicles)
+                machine_ref::measure(SMOKE_SCENARIO, args.vehicles, args.imu_batch)
                     .inspect_err(|e| eprintln!("uavnav: machine reference not measured: {e}"))
             });
             let before = match &args.metrics {

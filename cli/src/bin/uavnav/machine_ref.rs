@@ -4,9 +4,9 @@
 //! service 3.5 µs per input one day and 6 µs another (README, capacity).
 //!
 //! The reference is the estimator alone (no service, no network) on the built-in smoke flight,
-//! driven as the service drives it: every vehicle of the run takes a 20 ms message (4 IMU
-//! samples) in turn, so that each one's state has left the cache when its next message comes;
-//! and one vehicle alone, whose state stays cached. The gap between the two is the price of the
+//! driven as the service drives it: every vehicle of the run takes a message of the run's size
+//! (`--imu-batch` samples; 4, 20 ms at 200 Hz, by default) in turn, so that each one's state has
+//! left the cache when its next message comes; and one vehicle alone, whose state stays cached. The gap between the two is the price of the
 //! fleet's size on this machine's caches.
 
 use std::time::Instant;
@@ -14,8 +14,6 @@ use std::time::Instant;
 use uavnav_estimator::{Estimator, EstimatorParams};
 use uavnav_sim::{Flight, Scenario};
 
-/// IMU samples per message (the load generator's default 20 ms messages at 200 Hz).
-const PER_MESSAGE: usize = 4;
 /// Messages timed per vehicle of the fleet.
 const FLEET_LAPS: usize = 20;
 /// Messages timed for the single vehicle (one run; the best of [`SINGLE_RUNS`] is kept).
@@ -30,21 +28,27 @@ const WARM_UP_S: f64 = 12.0;
 pub struct Reference {
     /// Vehicles of the fleet timing.
     pub vehicles: usize,
+    /// IMU samples per message.
+    pub per_message: usize,
     /// µs per IMU sample, the vehicles taking messages in turn.
     pub fleet_us: f64,
     /// µs per IMU sample, one vehicle alone.
     pub single_us: f64,
 }
 
-/// Measures the reference for a fleet of `vehicles` on the flight of `scenario_toml`.
-pub fn measure(scenario_toml: &str, vehicles: usize) -> Result<Reference, String> {
+/// Measures the reference for a fleet of `vehicles` taking messages of `per_message` IMU samples,
+/// on the flight of `scenario_toml`.
+pub fn measure(
+    scenario_toml: &str,
+    vehicles: usize,
+    per_message: usize,
+) -> Result<Reference, String> {
     let mut s = Scenario::from_toml_str(scenario_toml).map_err(|e| format!("{e:?}"))?;
     s.camera.enabled = false; // frames would be rendered, and the estimator alone is timed
+    let per_message = per_message.max(1);
     let laps = FLEET_LAPS.max(SINGLE_LAPS) + 1;
-    let rate_hz = 200.0;
-    s.duration_s = s
-        .duration_s
-        .max(WARM_UP_S + (laps * PER_MESSAGE) as f64 / rate_hz + 1.0);
+    let timed_s = (laps * per_message) as f64 / s.imu.rate_hz;
+    s.duration_s = s.duration_s.max(WARM_UP_S + timed_s + 1.0);
     let flight = Flight::new(&s).map_err(|e| e.to_string())?;
     let imu = flight.imu();
     let start = imu
@@ -52,10 +56,13 @@ pub fn measure(scenario_toml: &str, vehicles: usize) -> Result<Reference, String
         .position(|x| (x.t_ns - imu[0].t_ns) as f64 * 1e-9 >= WARM_UP_S)
         .ok_or("the reference flight is shorter than its warm-up")?;
     let samples = imu
-        .get(start..start + laps * PER_MESSAGE)
+        .get(start..start + laps * per_message)
         .ok_or("the reference flight is too short")?;
     let warm = warmed_up(&flight, start)?;
-    let message = |k: usize| &samples[k * PER_MESSAGE..(k + 1) * PER_MESSAGE];
+    let message = |k: usize| &samples[k * per_message..(k + 1) * per_message];
+    let per_sample_us = |t0: Instant, messages: usize| {
+        t0.elapsed().as_secs_f64() * 1e6 / (messages * per_message) as f64
+    };
 
     // The fleet: one untimed message first, so that each clone's buffers (cut to their length by
     // the clone) grow back to their steady size.
@@ -81,6 +88,7 @@ pub fn measure(scenario_toml: &str, vehicles: usize) -> Result<Reference, String
     }
     Ok(Reference {
         vehicles,
+        per_message,
         fleet_us,
         single_us,
     })
@@ -113,20 +121,16 @@ fn push_all(fleet: &mut [Estimator], message: &[uavnav_core::ImuSample]) {
     }
 }
 
-/// µs per IMU sample since `t0`, for `messages` messages.
-fn per_sample_us(t0: Instant, messages: usize) -> f64 {
-    t0.elapsed().as_secs_f64() * 1e6 / (messages * PER_MESSAGE) as f64
-}
-
 /// The line `uavnav loadtest --metrics` prints.
 pub fn line(r: &Reference) -> String {
     format!(
         "Machine reference: the estimator alone takes {:.2} µs per IMU sample for {} vehicle{} \
-         taking 20 ms messages in turn ({:.2} µs for one vehicle alone); the service's cost per \
-         input includes it",
+         taking {}-sample messages in turn ({:.2} µs for one vehicle alone); the service's cost \
+         per input includes it",
         r.fleet_us,
         r.vehicles,
         if r.vehicles == 1 { "" } else { "s" },
+        r.per_message,
         r.single_us
     )
 }
@@ -139,11 +143,12 @@ mod tests {
     fn the_line_names_both_figures() {
         let l = line(&Reference {
             vehicles: 2000,
+            per_message: 4,
             fleet_us: 1.456,
             single_us: 0.934,
         });
         assert!(
-            l.contains("1.46 µs per IMU sample for 2000 vehicles"),
+            l.contains("1.46 µs per IMU sample for 2000 vehicles taking 4-sample messages"),
             "{l}"
         );
         assert!(l.contains("0.93 µs for one vehicle alone"), "{l}");
