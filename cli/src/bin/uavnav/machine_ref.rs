@@ -19,7 +19,7 @@ const FLEET_LAPS: usize = 20;
 /// Messages timed for the single vehicle (one run; the best of [`SINGLE_RUNS`] is kept).
 const SINGLE_LAPS: usize = 100;
 /// Runs of the single-vehicle timing (the least disturbed one is the machine's speed).
-const SINGLE_RUNS: usize = 5;
+const SINGLE_RUNS: usize = 20;
 /// Seconds of flight before the timed samples: the filter is initialised and fusing GNSS.
 const WARM_UP_S: f64 = 12.0;
 
