@@ -3,13 +3,17 @@
 //! Labels stay low-cardinality (transport, input kind, outcome): per-vehicle detail lives in the
 //! health stream, not in metric labels.
 
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
+
+pub mod histogram;
+
+pub use histogram::BatchHistogram;
 
 use prometheus_client::encoding::{EncodeLabelSet, EncodeLabelValue, LabelValueEncoder};
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::family::Family;
 use prometheus_client::metrics::gauge::Gauge;
-use prometheus_client::metrics::histogram::{Histogram, exponential_buckets};
+use prometheus_client::metrics::histogram::exponential_buckets;
 use prometheus_client::registry::Registry;
 
 /// Which transport an input came through.
@@ -170,6 +174,44 @@ pub struct InputLabels {
     pub outcome: Outcome,
 }
 
+impl InputLabels {
+    /// Where these labels' counter is kept in [`Metrics`]'s cache: below [`INPUT_LABEL_SETS`],
+    /// one slot per combination. The matches are exhaustive, so that a new variant cannot be
+    /// forgotten here.
+    fn index(&self) -> usize {
+        let transport = match self.transport {
+            Transport::Grpc => 0,
+            Transport::Zenoh => 1,
+        };
+        let kind = match self.kind {
+            Kind::Imu => 0,
+            Kind::Gnss => 1,
+            Kind::Mag => 2,
+            Kind::Baro => 3,
+            Kind::Camera => 4,
+            Kind::Config => 5,
+            Kind::Malformed => 6,
+        };
+        let outcome = match self.outcome {
+            Outcome::Accepted => 0,
+            Outcome::Invalid => 1,
+            Outcome::Precondition => 2,
+            Outcome::Late => 3,
+            Outcome::Future => 4,
+            Outcome::Shed => 5,
+            Outcome::Exhausted => 6,
+        };
+        (transport * INPUT_KINDS + kind) * INPUT_OUTCOMES + outcome
+    }
+}
+
+/// Variants of [`Kind`].
+const INPUT_KINDS: usize = 7;
+/// Variants of [`Outcome`].
+const INPUT_OUTCOMES: usize = 7;
+/// Combinations of [`InputLabels`] (2 transports).
+const INPUT_LABEL_SETS: usize = 2 * INPUT_KINDS * INPUT_OUTCOMES;
+
 /// Labels of `uavnav_inputs_refused_total`.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, EncodeLabelSet)]
 pub struct RefusedLabels {
@@ -220,6 +262,9 @@ pub struct Metrics {
     pub registry: Arc<Registry>,
     /// Inputs by transport, kind and outcome (IMU counted per sample).
     pub inputs: Family<InputLabels, Counter>,
+    /// The counters of `inputs`, each kept here the first time its labels are used: counting an
+    /// input then takes no lock and hashes nothing (every IMU batch counts one).
+    input_counters: Arc<[OnceLock<Counter>; INPUT_LABEL_SETS]>,
     /// Refused input messages by transport, kind and reason (a refused IMU batch counts once).
     pub refused: Family<RefusedLabels, Counter>,
     /// Messages the recorder dropped, by reason.
@@ -242,8 +287,8 @@ pub struct Metrics {
     pub evictions: Counter,
     /// Idle unconfigured vehicles displaced by a new vehicle at the vehicle limit.
     pub admission_evictions: Counter,
-    /// Ingest-to-pose latency, s.
-    pub latency: Histogram,
+    /// Ingest-to-pose latency, s (observed a published batch at a time).
+    pub latency: BatchHistogram,
     /// Vision jobs completed.
     pub vision_done: Counter,
     /// Vision jobs that failed (engine error or panic).
@@ -314,7 +359,7 @@ impl Metrics {
         let health_reports = Counter::default();
         let vehicles = Gauge::default();
         let evictions = Counter::default();
-        let latency = Histogram::new(exponential_buckets(0.0005, 2.0, 14));
+        let latency = BatchHistogram::new(exponential_buckets(0.0005, 2.0, 14));
         let vision_done = Counter::default();
         let vision_failed = Counter::default();
         let vision_shed = Counter::default();
@@ -500,6 +545,7 @@ impl Metrics {
         Self {
             registry: Arc::new(registry),
             inputs,
+            input_counters: Arc::new(std::array::from_fn(|_| OnceLock::new())),
             refused,
             record_dropped,
             record_written,
@@ -555,12 +601,13 @@ impl Metrics {
 
     /// Counts `n` inputs.
     pub fn input(&self, transport: Transport, kind: Kind, outcome: Outcome, n: u64) {
-        self.inputs
-            .get_or_create(&InputLabels {
-                transport,
-                kind,
-                outcome,
-            })
+        let labels = InputLabels {
+            transport,
+            kind,
+            outcome,
+        };
+        self.input_counters[labels.index()]
+            .get_or_init(|| self.inputs.get_or_create(&labels).clone())
             .inc_by(n);
     }
 
@@ -612,5 +659,83 @@ impl Metrics {
 impl Default for Metrics {
     fn default() -> Self {
         Self::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TRANSPORTS: [Transport; 2] = [Transport::Grpc, Transport::Zenoh];
+    const KINDS: [Kind; INPUT_KINDS] = [
+        Kind::Imu,
+        Kind::Gnss,
+        Kind::Mag,
+        Kind::Baro,
+        Kind::Camera,
+        Kind::Config,
+        Kind::Malformed,
+    ];
+    const OUTCOMES: [Outcome; INPUT_OUTCOMES] = [
+        Outcome::Accepted,
+        Outcome::Invalid,
+        Outcome::Precondition,
+        Outcome::Late,
+        Outcome::Future,
+        Outcome::Shed,
+        Outcome::Exhausted,
+    ];
+
+    fn every_label_set() -> impl Iterator<Item = InputLabels> {
+        TRANSPORTS.into_iter().flat_map(|transport| {
+            KINDS.into_iter().flat_map(move |kind| {
+                OUTCOMES.into_iter().map(move |outcome| InputLabels {
+                    transport,
+                    kind,
+                    outcome,
+                })
+            })
+        })
+    }
+
+    #[test]
+    fn every_input_label_set_has_its_own_cache_slot() {
+        let mut seen = [false; INPUT_LABEL_SETS];
+        for labels in every_label_set() {
+            let i = labels.index();
+            assert!(!seen[i], "{labels:?} shares slot {i}");
+            seen[i] = true;
+        }
+        assert!(seen.iter().all(|s| *s));
+    }
+
+    #[test]
+    fn cached_input_counters_are_the_familys() {
+        let m = Metrics::new();
+        // Before any input, no series (the cache creates a series only when used).
+        assert!(!m.encode().contains("uavnav_inputs_total{"));
+        m.input(Transport::Grpc, Kind::Imu, Outcome::Accepted, 4);
+        m.input(Transport::Grpc, Kind::Imu, Outcome::Accepted, 3);
+        m.input(Transport::Zenoh, Kind::Gnss, Outcome::Late, 1);
+        for labels in every_label_set() {
+            let want = match (labels.transport, labels.kind, labels.outcome) {
+                (Transport::Grpc, Kind::Imu, Outcome::Accepted) => 7,
+                (Transport::Zenoh, Kind::Gnss, Outcome::Late) => 1,
+                _ => 0,
+            };
+            assert_eq!(m.inputs.get_or_create(&labels).get(), want, "{labels:?}");
+        }
+        let text = m.encode();
+        assert!(
+            text.contains(
+                "uavnav_inputs_total{transport=\"grpc\",kind=\"imu\",outcome=\"accepted\"} 7"
+            ),
+            "{text}"
+        );
+        // A clone shares the cache and the family.
+        m.clone()
+            .input(Transport::Grpc, Kind::Imu, Outcome::Accepted, 1);
+        assert!(text.len() <= m.encode().len());
+        assert!(m.encode().contains("outcome=\"accepted\"} 8"));
     }
 }
