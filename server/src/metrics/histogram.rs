@@ -54,11 +54,6 @@ impl BatchHistogram {
         }
     }
 
-    /// Records one observation.
-    pub fn observe(&self, value: f64) {
-        self.observe_all(&[value]);
-    }
-
     /// Records every value of `values` under one lock. A NaN counts in the `+Inf` bucket (as
     /// `prometheus_client` does) and adds NaN to the sum.
     pub fn observe_all(&self, values: &[f64]) {
@@ -155,7 +150,7 @@ mod tests {
         let ours = BatchHistogram::new(exponential_buckets(0.0005, 2.0, 14));
         ours.observe_all(&values[..4]);
         for v in &values[4..] {
-            ours.observe(*v);
+            ours.observe_all(&[*v]);
         }
         let theirs = Histogram::new(exponential_buckets(0.0005, 2.0, 14));
         for v in values {

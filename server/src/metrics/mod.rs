@@ -127,6 +127,12 @@ macro_rules! lowercase_label {
                 encoder.write_str(match self { $(Self::$v => $s),* })
             }
         }
+
+        impl $t {
+            /// Every variant (the match above is exhaustive, so none is left out).
+            #[allow(dead_code)] // used for some label types only
+            pub const ALL: &'static [Self] = &[$(Self::$v),*];
+        }
     };
 }
 
@@ -175,42 +181,16 @@ pub struct InputLabels {
 }
 
 impl InputLabels {
-    /// Where these labels' counter is kept in [`Metrics`]'s cache: below [`INPUT_LABEL_SETS`],
-    /// one slot per combination. The matches are exhaustive, so that a new variant cannot be
-    /// forgotten here.
+    /// Where these labels' counter is kept in [`Metrics`]'s cache: one slot per combination,
+    /// below [`INPUT_LABEL_SETS`] (the variants are numbered from 0, as declared).
     fn index(&self) -> usize {
-        let transport = match self.transport {
-            Transport::Grpc => 0,
-            Transport::Zenoh => 1,
-        };
-        let kind = match self.kind {
-            Kind::Imu => 0,
-            Kind::Gnss => 1,
-            Kind::Mag => 2,
-            Kind::Baro => 3,
-            Kind::Camera => 4,
-            Kind::Config => 5,
-            Kind::Malformed => 6,
-        };
-        let outcome = match self.outcome {
-            Outcome::Accepted => 0,
-            Outcome::Invalid => 1,
-            Outcome::Precondition => 2,
-            Outcome::Late => 3,
-            Outcome::Future => 4,
-            Outcome::Shed => 5,
-            Outcome::Exhausted => 6,
-        };
-        (transport * INPUT_KINDS + kind) * INPUT_OUTCOMES + outcome
+        (self.transport as usize * Kind::ALL.len() + self.kind as usize) * Outcome::ALL.len()
+            + self.outcome as usize
     }
 }
 
-/// Variants of [`Kind`].
-const INPUT_KINDS: usize = 7;
-/// Variants of [`Outcome`].
-const INPUT_OUTCOMES: usize = 7;
-/// Combinations of [`InputLabels`] (2 transports).
-const INPUT_LABEL_SETS: usize = 2 * INPUT_KINDS * INPUT_OUTCOMES;
+/// Combinations of [`InputLabels`].
+const INPUT_LABEL_SETS: usize = Transport::ALL.len() * Kind::ALL.len() * Outcome::ALL.len();
 
 /// Labels of `uavnav_inputs_refused_total`.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, EncodeLabelSet)]
@@ -666,30 +646,10 @@ impl Default for Metrics {
 mod tests {
     use super::*;
 
-    const TRANSPORTS: [Transport; 2] = [Transport::Grpc, Transport::Zenoh];
-    const KINDS: [Kind; INPUT_KINDS] = [
-        Kind::Imu,
-        Kind::Gnss,
-        Kind::Mag,
-        Kind::Baro,
-        Kind::Camera,
-        Kind::Config,
-        Kind::Malformed,
-    ];
-    const OUTCOMES: [Outcome; INPUT_OUTCOMES] = [
-        Outcome::Accepted,
-        Outcome::Invalid,
-        Outcome::Precondition,
-        Outcome::Late,
-        Outcome::Future,
-        Outcome::Shed,
-        Outcome::Exhausted,
-    ];
-
     fn every_label_set() -> impl Iterator<Item = InputLabels> {
-        TRANSPORTS.into_iter().flat_map(|transport| {
-            KINDS.into_iter().flat_map(move |kind| {
-                OUTCOMES.into_iter().map(move |outcome| InputLabels {
+        Transport::ALL.iter().flat_map(|&transport| {
+            Kind::ALL.iter().flat_map(move |&kind| {
+                Outcome::ALL.iter().map(move |&outcome| InputLabels {
                     transport,
                     kind,
                     outcome,

@@ -645,8 +645,8 @@ impl Actor {
             return;
         }
         let now = mono_now();
-        // The shared histogram is locked once per this many poses, not once per pose (at fleet
-        // scale, every worker thread observes hundreds of thousands of poses a second).
+        // The histogram (this thread's shard of it) is locked once per this many poses, not once
+        // per pose (at fleet scale, hundreds of thousands of poses a second).
         let mut latencies = [0.0; MAX_BATCH_POSES];
         let mut held = 0;
         for i in self.stamped..self.outbox.len() {
