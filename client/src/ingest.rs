@@ -32,6 +32,7 @@ use crate::error::{ClientError, check_vehicle_id};
 use crate::keys::Leaf;
 use crate::pb;
 use crate::pb::sensor_envelope::Payload;
+use uavnav_proto::ACK_RUNS_HEADER;
 
 /// Counters of one ingest stream (shared by its senders).
 #[derive(Debug, Default)]
@@ -135,12 +136,14 @@ impl IngestStats {
     }
 
     fn ack(&self, ack: &pb::IngestAck) {
-        self.acked.fetch_add(1, Ordering::Relaxed);
+        // A run of acceptances answers `covers` envelopes (0 from a service that sends none).
+        let n = u64::from(ack.covers.max(1));
+        self.acked.fetch_add(n, Ordering::Relaxed);
         let status =
             pb::IngestStatus::try_from(ack.status).unwrap_or(pb::IngestStatus::Unspecified);
         if status == pb::IngestStatus::Accepted {
-            self.accepted.fetch_add(1, Ordering::Relaxed);
-            self.ok.fetch_add(1, Ordering::Relaxed);
+            self.accepted.fetch_add(n, Ordering::Relaxed);
+            self.ok.fetch_add(n, Ordering::Relaxed);
         } else {
             self.status(status.as_str_name().trim_start_matches("INGEST_STATUS_"));
             if status == pb::IngestStatus::PermissionDenied
@@ -495,7 +498,14 @@ pub(crate) fn spawn_grpc_driver(
             // Vehicles whose configuration was re-sent on this stream and not yet acknowledged:
             // acks of data in flight keep saying `needs_config` until it arrives.
             let mut pending = std::collections::BTreeSet::new();
-            let last = match client.clone().ingest(requests).await {
+            // Acks for runs of plain acceptances (`IngestAck.covers`): one per read of the
+            // stream instead of one per envelope, at both ends.
+            let mut request = tonic::Request::new(requests);
+            request.metadata_mut().insert(
+                ACK_RUNS_HEADER,
+                tonic::metadata::MetadataValue::from_static("1"),
+            );
+            let last = match client.clone().ingest(request).await {
                 Ok(resp) => {
                     let mut acks = resp.into_inner();
                     loop {

@@ -7,6 +7,7 @@
 //! |---|---|
 //! | [`v1`] | generated messages (`SensorEnvelope`, `ImuBatch`, `GnssFix`, `CameraFrame`, `VehicleConfig`, `PoseEstimate`, `VehicleHealth`, `TruthSample`, ...) |
 //! | [`v1::uav_nav_server`], [`v1::uav_nav_client`] | the tonic server trait / client of service `uavnav.v1.UavNav` |
+//! | [`ACK_RUNS_HEADER`] | the `Ingest` request header that asks for one ack per run of plain acceptances |
 //! | [`FILE_DESCRIPTOR_SET`] | encoded `FileDescriptorSet` of all schemas (gRPC reflection, MCAP schemas) |
 //! | [`convert`] | `TryFrom<&wire>` for core types (validating; [`ConvertError`] names the field) and `From<&core>` for wire types |
 //! | [`compact`] | the compact pose the service carries from an actor to its senders ([`compact::Pose`], [`compact::PoseBatch`]) |
@@ -49,6 +50,12 @@ pub mod topics;
 pub mod wire;
 
 pub use convert::ConvertError;
+
+/// The request header by which an `Ingest` stream asks for acknowledgement runs (value `1`): one
+/// `IngestAck` for a run of consecutive plain acceptances, its `covers` counting them (see
+/// `service.proto`). The client library's streams ask; a stream that does not gets one ack per
+/// envelope.
+pub const ACK_RUNS_HEADER: &str = "uavnav-ack-runs";
 
 /// The generated `uavnav.v1` messages and gRPC service.
 #[allow(missing_docs, clippy::all, clippy::unwrap_used)]

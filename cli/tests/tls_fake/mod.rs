@@ -81,6 +81,7 @@ impl UavNav for Fake {
                 status: status as i32,
                 reason,
                 needs_config: false,
+                covers: 1,
             })
         });
         Ok(Response::new(Box::pin(acks)))

@@ -1,5 +1,6 @@
-//! The tonic `uavnav.v1.UavNav` service: `Ingest` (bidirectional, one ack per envelope, flow
-//! control through a bounded ack queue), `WatchPoses` / `WatchHealth` (server streams with
+//! The tonic `uavnav.v1.UavNav` service: `Ingest` (bidirectional, one ack per envelope or per
+//! run of plain acceptances when the stream asks ([`ack_runs`]), flow control through a bounded
+//! ack queue), `WatchPoses` / `WatchHealth` (server streams with
 //! selection and decimation), `GetPose`, `ListVehicles`, `ConfigureVehicle`, `ResetVehicle`.
 //!
 //! Stream-level failures get precise statuses: a malformed envelope ends `Ingest` with
@@ -10,7 +11,7 @@ use std::collections::HashMap;
 use std::pin::Pin;
 use std::sync::Arc;
 
-use futures::{Stream, StreamExt};
+use futures::{FutureExt, Stream, StreamExt};
 use tokio::sync::{broadcast, watch};
 use tonic::{Request, Response, Status, Streaming};
 use uavnav_proto::v1 as pb;
@@ -22,6 +23,7 @@ use crate::metrics::{Cause, Kind, Outcome, Transport};
 use crate::output::hub::{HealthReport, PoseBatch};
 use crate::security::{Access, AuthTransport, PeerInfo};
 use crate::service::Service;
+use crate::transport::ack_runs::{self, AckRuns};
 use crate::transport::response_queue;
 
 /// Outgoing message queue of one watch stream, in messages (and at most
@@ -160,6 +162,17 @@ pub async fn remap_transport_status<B>(
     resp
 }
 
+/// Queues one ack on an `Ingest` response stream; `Err` when the stream is gone.
+async fn send_ack(
+    tx: &response_queue::Sender<Result<pb::IngestAck, Status>>,
+    ack: pb::IngestAck,
+) -> Result<(), ()> {
+    // Two strings are its only heap (no encoding pass on the ingest path).
+    let bytes =
+        std::mem::size_of::<pb::IngestAck>() + ack.vehicle_id.capacity() + ack.reason.capacity();
+    tx.send(Ok(ack), bytes).await.map_err(drop)
+}
+
 async fn ack_envelope(service: &Service, access: &Access, e: pb::SensorEnvelope) -> pb::IngestAck {
     let verdict = match e.payload.as_ref().map(Payload::from) {
         Some(p) => {
@@ -194,6 +207,8 @@ async fn ack_envelope(service: &Service, access: &Access, e: pb::SensorEnvelope)
         status: verdict.status as i32,
         reason: verdict.reason.into(),
         needs_config: verdict.needs_config,
+        // Set by `AckRuns` on a stream that asked for runs; unset (0) otherwise.
+        covers: 0,
     }
 }
 
@@ -380,6 +395,7 @@ impl UavNav for UavNavService {
         request: Request<Streaming<pb::SensorEnvelope>>,
     ) -> Result<Response<Self::IngestStream>, Status> {
         let access = self.access(&request)?;
+        let mut runs = AckRuns::new(ack_runs::asked(request.metadata()));
         let mut inbound = request.into_inner();
         // Bounded: when the client stops reading acks we stop reading envelopes (HTTP/2 flow
         // control then pushes back on the sender).
@@ -388,10 +404,27 @@ impl UavNav for UavNavService {
         let mut stopping = self.stopping();
         tokio::spawn(async move {
             loop {
-                let next = tokio::select! {
-                    biased;
-                    _ = stopping.wait_for(|s| *s) => break,
-                    m = inbound.next() => m,
+                // With a run of acks held, an envelope already received extends it; when none
+                // is, the run goes out before the task waits, so no ack waits on the client.
+                let ready = if runs.holding() {
+                    inbound.next().now_or_never()
+                } else {
+                    None
+                };
+                let next = match ready {
+                    Some(m) => m,
+                    None => {
+                        if let Some(run) = runs.flush()
+                            && send_ack(&tx, run).await.is_err()
+                        {
+                            return;
+                        }
+                        tokio::select! {
+                            biased;
+                            _ = stopping.wait_for(|s| *s) => break,
+                            m = inbound.next() => m,
+                        }
+                    }
                 };
                 match next {
                     None => break,
@@ -406,21 +439,32 @@ impl UavNav for UavNavService {
                             metrics.input(Transport::Grpc, Kind::Malformed, outcome, 1);
                             metrics.refuse(Transport::Grpc, Kind::Malformed, cause);
                         }
+                        if let Some(run) = runs.flush()
+                            && send_ack(&tx, run).await.is_err()
+                        {
+                            return;
+                        }
                         let bytes = std::mem::size_of::<Status>() + status.message().len();
                         let _ = tx.send(Err(status), bytes).await;
-                        break;
+                        return;
                     }
                     Some(Ok(envelope)) => {
+                        let data = !matches!(
+                            envelope.payload,
+                            Some(pb::sensor_envelope::Payload::Config(_))
+                        );
                         let ack = ack_envelope(&service, &access, envelope).await;
-                        // Two strings are its only heap (no encoding pass on the ingest path).
-                        let bytes = std::mem::size_of::<pb::IngestAck>()
-                            + ack.vehicle_id.capacity()
-                            + ack.reason.capacity();
-                        if tx.send(Ok(ack), bytes).await.is_err() {
-                            break;
+                        for a in <[_; 2]>::from(runs.push(ack, data)).into_iter().flatten() {
+                            if send_ack(&tx, a).await.is_err() {
+                                return;
+                            }
                         }
                     }
                 }
+            }
+            // The end of the stream, or the service stopping: what was acknowledged goes out.
+            if let Some(run) = runs.flush() {
+                let _ = send_ack(&tx, run).await;
             }
         });
         Ok(Response::new(Box::pin(rx)))

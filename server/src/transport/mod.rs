@@ -3,6 +3,7 @@
 //!
 //! | file | adapter |
 //! |---|---|
+//! | [`ack_runs`] | one acknowledgement for a run of plain acceptances on an `Ingest` stream that asks for it |
 //! | [`arrivals`] | one byte budget for the gRPC messages arriving on all streams (`grpc.arrival_bytes`) |
 //! | [`conn`] | every TCP listener's accept loop: connection limits, idle timeout, TLS handshakes, the file-descriptor budget |
 //! | [`grpc`] | the tonic `uavnav.v1.UavNav` service |
@@ -14,6 +15,7 @@
 //! | [`zenoh_out`] | the Zenoh output task: poses and health put only while a remote subscriber matches their leaf |
 //! | [`zenoh_stats`] | what Zenoh dropped on congested links, read from its runtime into `/metrics` |
 
+pub mod ack_runs;
 pub mod arrivals;
 pub mod conn;
 pub mod grpc;

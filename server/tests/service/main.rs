@@ -12,6 +12,7 @@ mod common;
 
 mod own_process;
 
+mod ack_runs;
 mod actor_time;
 mod admission;
 mod allocator_env;
