@@ -2,7 +2,9 @@
 //! [`IngestSender`]s, with counters of what was sent, acknowledged, refused and lost.
 //!
 //! Over gRPC an `Ingest` is one `Ingest` bidirectional stream; a task reads the acks (so flow
-//! control never stalls the sender) and reopens the stream with backoff when it breaks. Envelopes
+//! control never stalls the sender) and reopens the stream with backoff when it breaks. The
+//! stream asks for ack runs (`uavnav_proto::ACK_RUNS_HEADER`): one ack answers a run of plain
+//! acceptances, and its `covers` is what the counters add. Envelopes
 //! in flight at a break are lost and counted (`sent - acked`). A reopened stream first re-sends
 //! every vehicle configuration this client gave (in the stream or by `Client::configure`), so a
 //! service that restarted has them before the data (the service ignores a configuration a
