@@ -81,7 +81,8 @@ impl UavNav for Fake {
                 status: status as i32,
                 reason,
                 needs_config: false,
-                covers: 1,
+                // One ack per envelope, as a service does for a stream that asks for no runs.
+                covers: 0,
             })
         });
         Ok(Response::new(Box::pin(acks)))

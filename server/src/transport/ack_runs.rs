@@ -43,21 +43,17 @@ impl AckRuns {
     /// Takes the ack of the next envelope (`data`: it carried sensor data, not a configuration)
     /// and returns what must go out now, in order: a finished run, then the ack itself when it
     /// cannot join a run.
-    pub fn push(
-        &mut self,
-        mut ack: pb::IngestAck,
-        data: bool,
-    ) -> (Option<pb::IngestAck>, Option<pb::IngestAck>) {
+    pub fn push(&mut self, mut ack: pb::IngestAck, data: bool) -> [Option<pb::IngestAck>; 2] {
+        if !self.enabled {
+            return [None, Some(ack)];
+        }
         let plain = data
             && ack.status == pb::IngestStatus::Accepted as i32
             && ack.reason.is_empty()
             && !ack.needs_config;
-        if !self.enabled {
-            return (None, Some(ack));
-        }
         ack.covers = 1;
         if !plain {
-            return (self.run.take(), Some(ack));
+            return [self.run.take(), Some(ack)];
         }
         match self.run.as_mut() {
             Some(run) => {
@@ -65,12 +61,12 @@ impl AckRuns {
                 run.sequence = ack.sequence;
                 run.vehicle_id = ack.vehicle_id;
                 if run.covers >= MAX_RUN {
-                    return (self.run.take(), None);
+                    return [self.run.take(), None];
                 }
             }
             None => self.run = Some(ack),
         }
-        (None, None)
+        [None, None]
     }
 
     /// Whether a run is held (the caller sends it with [`AckRuns::flush`] before waiting).
@@ -101,9 +97,7 @@ mod tests {
     fn feed(runs: &mut AckRuns, acks: Vec<(pb::IngestAck, bool)>) -> Vec<pb::IngestAck> {
         let mut out = Vec::new();
         for (a, data) in acks {
-            let (first, second) = runs.push(a, data);
-            out.extend(first);
-            out.extend(second);
+            out.extend(runs.push(a, data).into_iter().flatten());
         }
         out.extend(runs.flush());
         out

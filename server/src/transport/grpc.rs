@@ -454,7 +454,7 @@ impl UavNav for UavNavService {
                             Some(pb::sensor_envelope::Payload::Config(_))
                         );
                         let ack = ack_envelope(&service, &access, envelope).await;
-                        for a in <[_; 2]>::from(runs.push(ack, data)).into_iter().flatten() {
+                        for a in runs.push(ack, data).into_iter().flatten() {
                             if send_ack(&tx, a).await.is_err() {
                                 return;
                             }
