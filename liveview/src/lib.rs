@@ -109,6 +109,7 @@ impl LiveTap {
         self.poses(Arc::new(PoseBatch {
             vehicle_id: p.vehicle_id.as_str().into(),
             poses: vec![CompactPose::from_wire(&p)],
+            first_seq: 0,
         }));
     }
 

@@ -147,6 +147,9 @@ pub struct PoseBatch {
     pub vehicle_id: Arc<str>,
     /// Its poses.
     pub poses: Vec<Pose>,
+    /// The number of the first pose: a vehicle's poses are numbered from 0 since its actor
+    /// started, so that a watch decimates them with no state of its own per vehicle.
+    pub first_seq: u64,
 }
 
 impl PoseBatch {
@@ -199,6 +202,7 @@ mod tests {
         let b = PoseBatch {
             vehicle_id: "uav-7".into(),
             poses: vec![pose(1), pose(2)],
+            first_seq: 0,
         };
         for i in 0..2 {
             let bytes = b.encode_wire(i).unwrap();

@@ -134,6 +134,9 @@ pub struct HealthReport {
     /// budget (`zenoh.repeat_health_per_s`), so that one watcher does not make an idle fleet's
     /// reminders cost in proportion to its size; gRPC watchers get every report.
     pub repeat: bool,
+    /// The report's number: a vehicle's reports are numbered from 0 since its actor started
+    /// (watches decimate by it).
+    pub seq: u64,
 }
 
 /// Whether `new` says nothing that `prev` did not: the same vehicle, mode, rates, latencies,

@@ -7,7 +7,6 @@
 //! INVALID_ARGUMENT and an oversize one with RESOURCE_EXHAUSTED (tonic reports them as INTERNAL and
 //! OUT_OF_RANGE; [`remap_transport_status`] fixes that for unary calls too).
 
-use std::collections::HashMap;
 use std::pin::Pin;
 use std::sync::Arc;
 
@@ -255,6 +254,8 @@ trait Watched: Send + Sync + 'static {
     fn vehicle_id(&self) -> &str;
     /// Messages in this item.
     fn len(&self) -> usize;
+    /// The vehicle's number of the item's first message (numbered from 0 per vehicle).
+    fn first_seq(&self) -> u64;
     /// Message `i` as sent.
     fn message(&self, i: usize) -> Option<Self::Out>;
     /// The bytes a queued message holds.
@@ -268,6 +269,9 @@ impl Watched for HealthReport {
     }
     fn len(&self) -> usize {
         1
+    }
+    fn first_seq(&self) -> u64 {
+        self.seq
     }
     fn message(&self, _: usize) -> Option<Self::Out> {
         Some((*self.health).clone())
@@ -284,6 +288,9 @@ impl Watched for PoseBatch {
     }
     fn len(&self) -> usize {
         self.poses.len()
+    }
+    fn first_seq(&self) -> u64 {
+        self.first_seq
     }
     fn message(&self, i: usize) -> Option<Self::Out> {
         self.wire(i)
@@ -304,7 +311,7 @@ fn watch_stream<T: Watched>(
 ) -> BoxStream<T::Out> {
     let (tx, out) = response_queue::channel(WATCH_QUEUE);
     tokio::spawn(async move {
-        let mut filter = WatchFilter::new(sel);
+        let filter = WatchFilter { sel };
         loop {
             let first = tokio::select! {
                 r = rx.recv() => r,
@@ -318,7 +325,7 @@ fn watch_stream<T: Watched>(
             while let Some(item) = next.take() {
                 match item {
                     Ok(m) => {
-                        for i in filter.keep(m.vehicle_id(), m.len()) {
+                        for i in filter.keep(m.vehicle_id(), m.first_seq(), m.len()) {
                             let Some(out) = m.message(i) else { continue };
                             let bytes = T::held_bytes(&out);
                             if tx.send(Ok(out), bytes).await.is_err() {
@@ -345,23 +352,23 @@ fn watch_stream<T: Watched>(
     Box::pin(out)
 }
 
-/// A watch's selector plus its per-vehicle decimation counters.
+/// A watch's selector and decimation. It keeps nothing per vehicle: the messages carry their
+/// vehicle's numbering, so a watch's memory does not grow with the ids it sees (a flood of new
+/// ids), and it does no lookup per message (at fleet scale it sees every pose of every vehicle).
 struct WatchFilter {
     sel: Selector,
-    seen: HashMap<String, u64>,
 }
 
 impl WatchFilter {
-    fn new(sel: Selector) -> Self {
-        Self {
-            sel,
-            seen: HashMap::new(),
-        }
-    }
-
-    /// Which of the next `n` messages of vehicle `id` go out: none unless the vehicle is
-    /// selected, then the first of every `decimation` of that vehicle's messages.
-    fn keep(&mut self, id: &str, n: usize) -> std::iter::StepBy<std::ops::Range<usize>> {
+    /// Which of the `n` messages of vehicle `id` numbered from `first_seq` on go out: none unless
+    /// the vehicle is selected, then those whose number is divisible by `decimation` (so every
+    /// watch with the same decimation gets the same messages, whenever it started).
+    fn keep(
+        &self,
+        id: &str,
+        first_seq: u64,
+        n: usize,
+    ) -> std::iter::StepBy<std::ops::Range<usize>> {
         if n == 0 || !self.sel.matches(id) {
             return (0..0).step_by(1);
         }
@@ -369,13 +376,7 @@ impl WatchFilter {
         if d == 1 {
             return (0..n).step_by(1);
         }
-        let seen = match self.seen.get_mut(id) {
-            Some(c) => c,
-            None => self.seen.entry(id.to_owned()).or_insert(0),
-        };
-        // Messages are numbered per vehicle from 0; numbers divisible by `d` go out.
-        let first = ((d - *seen % d) % d) as usize;
-        *seen += n as u64;
+        let first = ((d - first_seq % d) % d) as usize;
         (first.min(n)..n).step_by(d as usize)
     }
 }
@@ -582,31 +583,46 @@ mod tests {
     use super::*;
 
     fn filter(decimation: u32) -> WatchFilter {
-        WatchFilter::new(Selector {
-            ids: Vec::new(),
-            prefix: "a".into(),
-            all: false,
-            decimation,
-        })
+        WatchFilter {
+            sel: Selector {
+                ids: Vec::new(),
+                prefix: "a".into(),
+                all: false,
+                decimation,
+            },
+        }
     }
 
     /// Batches of any size keep exactly the messages a one-by-one count would: every
-    /// `decimation`-th of each vehicle's messages, numbered from 0, vehicles counted apart.
+    /// `decimation`-th of each vehicle's messages, numbered from 0.
     #[test]
     fn decimation_across_batches_matches_a_per_message_count() {
         for d in [1u32, 3, 10] {
-            let mut f = filter(d);
+            let f = filter(d);
             let (mut kept, mut base) = (Vec::new(), 0usize);
             for n in [4usize, 1, 7, 0, 10, 3, 2, 25] {
-                kept.extend(f.keep("a1", n).map(|i| base + i));
-                // Another vehicle in between must not disturb a1's count.
-                let _ = f.keep("a2", 5).count();
+                kept.extend(f.keep("a1", base as u64, n).map(|i| base + i));
                 base += n;
             }
             let expected: Vec<usize> = (0..base).filter(|k| k % d as usize == 0).collect();
             assert_eq!(kept, expected, "decimation {d}");
         }
-        assert_eq!(filter(2).keep("b1", 8).count(), 0, "unselected vehicle");
+        assert_eq!(filter(2).keep("b1", 0, 8).count(), 0, "unselected vehicle");
+    }
+
+    /// Two watches with the same decimation get the same messages whenever each started, and a
+    /// watch keeps nothing per vehicle however many ids it has seen.
+    #[test]
+    fn decimation_follows_the_vehicles_numbering() {
+        let f = filter(10);
+        // A watch that starts at the vehicle's 37th pose: its first is number 40.
+        assert_eq!(f.keep("a1", 37, 8).collect::<Vec<_>>(), vec![3]);
+        assert_eq!(f.keep("a1", 45, 4).count(), 0);
+        assert_eq!(f.keep("a1", 50, 1).collect::<Vec<_>>(), vec![0]);
+        assert_eq!(
+            std::mem::size_of::<WatchFilter>(),
+            std::mem::size_of::<Selector>()
+        );
     }
 
     /// A watcher that does not read falls behind the broadcast ring: it skips the oldest batches,
@@ -635,6 +651,7 @@ mod tests {
                     t_ns,
                     ..Default::default()
                 }],
+                first_seq: t_ns as u64,
             };
             let _ = btx.send(Arc::new(batch));
             tokio::task::yield_now().await;

@@ -11,7 +11,7 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::oneshot;
 use tracing::{Span, debug, info_span, warn};
 use uavnav_core::{
     BaroSample, CameraFrame, GnssFix, ImuSample, MagSample, SensorEvent, VehicleConfig,
@@ -25,6 +25,7 @@ use crate::vehicle::budgets::{ByteBudget, CameraBytes, CameraPixels, Reserved};
 use crate::vehicle::engine::{
     ActorStep, BoxedEngine, FrameFailureKind, PoolJob, SharedFactory, VisionOutcome,
 };
+use crate::vehicle::queue;
 use crate::vehicle::reorder::{Refused, ReorderBuffer};
 use crate::vehicle::ticks::{IDLE_HEALTH_EVERY, Ticks};
 use crate::vehicle::vision_pool::VisionPool;
@@ -191,14 +192,26 @@ fn frame_bytes(input: &Input) -> usize {
     }
 }
 
-/// The cloneable handle of a vehicle actor.
+/// The cloneable handle of a vehicle actor. One reference count to clone: the registry hands out
+/// a clone for every input message.
 #[derive(Debug, Clone)]
-pub struct VehicleHandle {
+pub struct VehicleHandle(Arc<HandleParts>);
+
+/// What a [`VehicleHandle`] holds (its fields read through it).
+#[derive(Debug)]
+pub struct HandleParts {
     /// The shared face of the vehicle.
     pub shared: Arc<VehicleShared>,
-    tx: mpsc::Sender<Msg>,
+    tx: queue::Sender<Msg>,
     /// Decoded sensor bytes queued at this vehicle (`vehicles.input_queue_bytes`).
     budget: ByteBudget,
+}
+
+impl std::ops::Deref for VehicleHandle {
+    type Target = HandleParts;
+    fn deref(&self) -> &HandleParts {
+        &self.0
+    }
 }
 
 impl VehicleHandle {
@@ -232,7 +245,7 @@ impl VehicleHandle {
     /// Like [`VehicleHandle::send`], but hands the message back when the actor is gone, so the
     /// caller can start a fresh actor and resend it.
     pub async fn send_or_return(&self, msg: Msg) -> Result<(), Msg> {
-        self.tx.send(msg).await.map_err(|e| e.0)
+        self.tx.send(msg).await
     }
 
     /// Queues a camera frame unless the vehicle already has `vehicles.camera_queue` frames or
@@ -290,7 +303,7 @@ pub fn spawn(
     ctx: Arc<Ctx>,
     on_exit: Box<dyn FnOnce(bool) + Send>,
 ) -> VehicleHandle {
-    let (tx, rx) = mpsc::channel(ctx.vehicles.input_queue);
+    let (tx, rx) = queue::channel(ctx.vehicles.input_queue);
     let ctx_budget = ctx.vehicles.input_queue_bytes;
     let engine = ctx.factory.create(&config);
     // The vehicle's span is the explicit parent of the actor's log events. Entering it on every
@@ -311,16 +324,18 @@ pub fn spawn(
         imu_clipped: 0,
         imu_gaps_bridged: 0,
         busy_reports: 2,
+        poses_published: 0,
+        health_published: 0,
     };
     tokio::spawn(async move {
         let evicted = actor.run(rx).await;
         on_exit(evicted);
     });
-    VehicleHandle {
+    VehicleHandle(Arc::new(HandleParts {
         shared,
         tx,
         budget: ByteBudget::new(ctx_budget),
-    }
+    }))
 }
 
 struct Actor {
@@ -348,6 +363,10 @@ struct Actor {
     /// Reports still due at every period: a message makes it 2 (the report covering it, and the
     /// next, whose rates show the vehicle went quiet).
     busy_reports: u8,
+    /// Poses published so far: the number of the next one (watches decimate by it).
+    poses_published: u64,
+    /// Health reports published so far: the number of the next one (likewise).
+    health_published: u64,
 }
 
 /// What an engine counter gained since `last` (its value at the previous report), which it then
@@ -361,7 +380,7 @@ fn counted_since(last: &mut u64, now: u64) -> u64 {
 
 impl Actor {
     /// The event loop; returns whether the actor was evicted for idleness.
-    async fn run(mut self, mut rx: mpsc::Receiver<Msg>) -> bool {
+    async fn run(mut self, mut rx: queue::Receiver<Msg>) -> bool {
         // Health ticks fall on start + k * period. An active vehicle wakes at every one; an idle
         // one only at the tick of its next report or of its eviction, so an idle fleet costs no
         // wake-ups in between. Input brings the next tick back to the coming period.
@@ -440,7 +459,7 @@ impl Actor {
     }
 
     /// Fuses everything still queued, waits for the outstanding vision jobs, publishes final health.
-    async fn drain(&mut self, rx: &mut mpsc::Receiver<Msg>) {
+    async fn drain(&mut self, rx: &mut queue::Receiver<Msg>) {
         rx.close();
         while let Ok(m) = rx.try_recv() {
             if !matches!(m, Msg::Stop) {
@@ -465,7 +484,7 @@ impl Actor {
     /// Handles up to [`DRAIN_MAX`] more messages that are already queued, so that one wake-up and
     /// one published batch serve them all: under load, when queues build up, the per-message costs
     /// shrink instead of adding to the backlog. Returns whether a `Stop` was taken.
-    fn take_queued(&mut self, rx: &mut mpsc::Receiver<Msg>) -> bool {
+    fn take_queued(&mut self, rx: &mut queue::Receiver<Msg>) -> bool {
         for _ in 0..DRAIN_MAX {
             if self.backlogged() {
                 break;
@@ -696,10 +715,13 @@ impl Actor {
 
     /// Puts one batch of this vehicle's poses on the hub, the `latest` one (the vehicle's pose
     /// now) first where `GetPose` reads it.
-    fn send_batch(&self, poses: Vec<Pose>, latest: bool) {
+    fn send_batch(&mut self, poses: Vec<Pose>, latest: bool) {
+        let first_seq = self.poses_published;
+        self.poses_published += poses.len() as u64;
         let batch = Arc::new(PoseBatch {
             vehicle_id: Arc::clone(&self.shared.id),
             poses,
+            first_seq,
         });
         if latest {
             self.shared.set_latest_pose(Arc::clone(&batch));
@@ -744,7 +766,9 @@ impl Actor {
         let _ = self.ctx.hub.health.send(Arc::new(HealthReport {
             health: report,
             repeat,
+            seq: self.health_published,
         }));
+        self.health_published += 1;
         self.ctx.metrics.health_reports.inc();
     }
 }

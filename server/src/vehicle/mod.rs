@@ -5,6 +5,7 @@
 //! |---|---|
 //! | [`registry`] | vehicle id → actor handle; creation on first data, removal on eviction |
 //! | [`actor`] | one task per vehicle owning its engine; bounded queues, reorder, overload policy |
+//! | [`queue`] | an actor's ordered input queue: bounded in messages, senders wait for room |
 //! | [`shared`] | the shared face of a vehicle: counters, the ingest time gate's state, latest pose/health (re-exported here) |
 //! | [`budgets`] | the budgets the actors share: queued sensor bytes, queued camera bytes, camera pixels |
 //! | [`ticks`] | an actor's health ticks, aligned to its start |
@@ -16,6 +17,7 @@
 pub mod actor;
 pub mod budgets;
 pub mod engine;
+pub mod queue;
 pub mod registry;
 pub mod reorder;
 pub mod runner_engine;
