@@ -192,26 +192,15 @@ fn frame_bytes(input: &Input) -> usize {
     }
 }
 
-/// The cloneable handle of a vehicle actor. One reference count to clone: the registry hands out
-/// a clone for every input message.
+/// The cloneable handle of a vehicle actor. Its parts are inline: the registry's admission pass
+/// reads every vehicle's shared face through the map's values, one pointer away.
 #[derive(Debug, Clone)]
-pub struct VehicleHandle(Arc<HandleParts>);
-
-/// What a [`VehicleHandle`] holds (its fields read through it).
-#[derive(Debug)]
-pub struct HandleParts {
+pub struct VehicleHandle {
     /// The shared face of the vehicle.
     pub shared: Arc<VehicleShared>,
     tx: queue::Sender<Msg>,
     /// Decoded sensor bytes queued at this vehicle (`vehicles.input_queue_bytes`).
     budget: ByteBudget,
-}
-
-impl std::ops::Deref for VehicleHandle {
-    type Target = HandleParts;
-    fn deref(&self) -> &HandleParts {
-        &self.0
-    }
 }
 
 impl VehicleHandle {
@@ -331,11 +320,11 @@ pub fn spawn(
         let evicted = actor.run(rx).await;
         on_exit(evicted);
     });
-    VehicleHandle(Arc::new(HandleParts {
+    VehicleHandle {
         shared,
         tx,
         budget: ByteBudget::new(ctx_budget),
-    }))
+    }
 }
 
 struct Actor {

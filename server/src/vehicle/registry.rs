@@ -34,14 +34,25 @@ pub enum RegistryError {
 
 /// The least recently active unconfigured vehicle silent for [`ADMISSION_IDLE_NS`], if any
 /// (one pass over the map, only at the limit).
-fn admission_victim(map: &HashMap<Arc<str>, VehicleHandle>, now_ns: i64) -> Option<Arc<str>> {
+fn admission_victim(map: &mut HashMap<Arc<str>, VehicleHandle>, now_ns: i64) -> Option<Arc<str>> {
     use std::sync::atomic::Ordering::Relaxed;
-    map.iter()
-        .filter(|(_, h)| !h.shared.configured.load(Relaxed))
-        .map(|(id, h)| (h.shared.last_input_wall_ns.load(Relaxed), id))
-        .filter(|(last, _)| now_ns - last >= ADMISSION_IDLE_NS)
-        .min_by_key(|(last, _)| *last)
-        .map(|(_, id)| Arc::clone(id))
+    // One pass over a full map (a flood of new ids makes one per new id) that reads each
+    // vehicle's shared face only, and drops the handles of configured vehicles whose actor
+    // stopped and whose exit hook has not removed them yet.
+    let mut victim: Option<(i64, Arc<str>)> = None;
+    map.retain(|id, h| {
+        if h.shared.configured.load(Relaxed) {
+            return !h.is_closed();
+        }
+        // An unconfigured vehicle whose actor stopped is left to its exit hook, or taken as
+        // the victim: either way it goes.
+        let last = h.shared.last_input_wall_ns.load(Relaxed);
+        if now_ns - last >= ADMISSION_IDLE_NS && victim.as_ref().is_none_or(|(l, _)| last < *l) {
+            victim = Some((last, Arc::clone(id)));
+        }
+        true
+    });
+    victim.map(|(_, id)| id)
 }
 
 /// The vehicle registry.
@@ -88,11 +99,15 @@ impl Registry {
         if let Some(h) = map.get(id).filter(|h| !h.is_closed()) {
             return Ok((h.clone(), false));
         }
-        map.retain(|_, h| !h.is_closed());
         let limit = self.ctx.vehicles.max_vehicles;
+        // Below the limit, creation costs the same however many vehicles there are.
+        let victim = if map.len() >= limit {
+            admission_victim(&mut map, crate::vehicle::wall_ns())
+        } else {
+            None
+        };
         if map.len() >= limit {
-            let victim = admission_victim(&map, crate::vehicle::wall_ns())
-                .ok_or(RegistryError::Full(limit))?;
+            let victim = victim.ok_or(RegistryError::Full(limit))?;
             if let Some(h) = map.remove(&victim) {
                 h.try_stop();
                 self.ctx.metrics.admission_evictions.inc();
