@@ -130,7 +130,7 @@ impl<T> Sender<T> {
         let shared = &*self.shared;
         let mut waited = false;
         loop {
-            {
+            let notified = {
                 let mut st = shared.lock();
                 if waited {
                     st.waiting -= 1;
@@ -145,14 +145,16 @@ impl<T> Sender<T> {
                     return Ok(());
                 }
                 st.waiting += 1;
-            }
-            // Counted as waiting before the lock was released: a message taken from now on
-            // notifies, and `Notify` keeps that notification for a waiter that comes late.
+                // Made under the lock: a `close` from now on reaches it (`notify_waiters` wakes
+                // every `Notified` made before it, polled or not), and a message taken from now
+                // on notifies one waiter (a permit `Notify` keeps for a waiter not yet polled).
+                shared.room.notified()
+            };
             let mut guard = Waiting {
                 shared,
                 armed: true,
             };
-            shared.room.notified().await;
+            notified.await;
             guard.armed = false;
             waited = true;
         }

@@ -36,19 +36,19 @@ pub enum RegistryError {
 /// (one pass over the map, only at the limit).
 fn admission_victim(map: &mut HashMap<Arc<str>, VehicleHandle>, now_ns: i64) -> Option<Arc<str>> {
     use std::sync::atomic::Ordering::Relaxed;
-    // One pass over a full map (a flood of new ids makes one per new id) that reads each
-    // vehicle's shared face only, and drops the handles of configured vehicles whose actor
-    // stopped and whose exit hook has not removed them yet.
+    // One pass over a full map (a flood of new ids makes one per new id), which also drops the
+    // handles of actors that stopped and whose exit hook has not removed them yet.
     let mut victim: Option<(i64, Arc<str>)> = None;
     map.retain(|id, h| {
-        if h.shared.configured.load(Relaxed) {
-            return !h.is_closed();
+        if h.is_closed() {
+            return false;
         }
-        // An unconfigured vehicle whose actor stopped is left to its exit hook, or taken as
-        // the victim: either way it goes.
-        let last = h.shared.last_input_wall_ns.load(Relaxed);
-        if now_ns - last >= ADMISSION_IDLE_NS && victim.as_ref().is_none_or(|(l, _)| last < *l) {
-            victim = Some((last, Arc::clone(id)));
+        if !h.shared.configured.load(Relaxed) {
+            let last = h.shared.last_input_wall_ns.load(Relaxed);
+            if now_ns - last >= ADMISSION_IDLE_NS && victim.as_ref().is_none_or(|(l, _)| last < *l)
+            {
+                victim = Some((last, Arc::clone(id)));
+            }
         }
         true
     });
